@@ -1,0 +1,142 @@
+//! Indexed triangle meshes.
+
+use crate::GeomError;
+use std::path::Path;
+
+/// A triangle mesh: positions (metres, frame named by the owner) and CCW-outward triangles.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriMesh {
+    /// Vertex positions, metres.
+    pub vertices: Vec<[f32; 3]>,
+    /// Vertex indices per triangle, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl TriMesh {
+    /// A mesh after checking that every index is in range and every coordinate finite.
+    pub fn new(vertices: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Result<Self, GeomError> {
+        let m = Self { vertices, triangles };
+        m.validate()?;
+        Ok(m)
+    }
+
+    /// Checks indices and coordinates.
+    pub fn validate(&self) -> Result<(), GeomError> {
+        if let Some(i) = self.vertices.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+            return Err(GeomError::InvalidMesh(format!("vertex {i} has a non-finite coordinate")));
+        }
+        let n = self.vertices.len() as u64;
+        if let Some(t) = self.triangles.iter().position(|t| t.iter().any(|&i| u64::from(i) >= n)) {
+            return Err(GeomError::InvalidMesh(format!(
+                "triangle {t} indexes a vertex beyond the {n} vertices"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Axis-aligned bounds `(min, max)`, or `None` for an empty mesh.
+    pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
+        let first = *self.vertices.first()?;
+        Some(self.vertices.iter().fold((first, first), |(mut lo, mut hi), v| {
+            for k in 0..3 {
+                lo[k] = lo[k].min(v[k]);
+                hi[k] = hi[k].max(v[k]);
+            }
+            (lo, hi)
+        }))
+    }
+
+    /// Signed volume (m³): positive for a closed mesh with outward CCW triangles.
+    pub fn signed_volume(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.vertices[i as usize].map(f64::from));
+                let cross = [
+                    b[1] * c[2] - b[2] * c[1],
+                    b[2] * c[0] - b[0] * c[2],
+                    b[0] * c[1] - b[1] * c[0],
+                ];
+                (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0
+            })
+            .sum()
+    }
+
+    /// Area-weighted vertex normals (unit; zero for isolated vertices).
+    pub fn vertex_normals(&self) -> Vec<[f32; 3]> {
+        let mut n = vec![[0.0f32; 3]; self.vertices.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+            let f = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+            for &i in t {
+                for k in 0..3 {
+                    n[i as usize][k] += f[k];
+                }
+            }
+        }
+        for v in &mut n {
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if len > 0.0 {
+                v.iter_mut().for_each(|x| *x /= len);
+            }
+        }
+        n
+    }
+
+    /// Applies `f` to every vertex (e.g. a change of frame).
+    pub fn map_vertices(&mut self, f: impl Fn([f32; 3]) -> [f32; 3]) {
+        self.vertices.iter_mut().for_each(|v| *v = f(*v));
+    }
+
+    /// Writes the mesh in the format its extension names: `.ply` (binary), `.obj`, `.glb`.
+    pub fn write(&self, path: &Path) -> Result<(), GeomError> {
+        match extension(path).as_deref() {
+            Some("ply") => crate::ply::write_ply(self, path),
+            Some("obj") => crate::obj::write_obj(self, path),
+            Some("glb") => crate::gltf::write_glb(self, path),
+            _ => Err(GeomError::format(path, "unknown mesh extension (use .ply, .obj or .glb)")),
+        }
+    }
+
+    /// Reads a `.ply` (ASCII or binary) or `.obj` mesh; polygons are fan-triangulated.
+    pub fn read(path: &Path) -> Result<Self, GeomError> {
+        let mesh = match extension(path).as_deref() {
+            Some("ply") => crate::ply::read_ply(path)?,
+            Some("obj") => crate::obj::read_obj(path)?,
+            _ => return Err(GeomError::format(path, "unknown mesh extension (use .ply or .obj)")),
+        };
+        mesh.validate().map_err(|e| GeomError::format(path, e.to_string()))?;
+        Ok(mesh)
+    }
+}
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
+}
+
+/// A unit cube (for tests and examples), CCW outward.
+pub fn unit_cube() -> TriMesh {
+    let v = (0..8).map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32]).collect();
+    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let t = quads.iter().flat_map(|q: &[u32; 4]| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+    TriMesh { vertices: v, triangles: t }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cube_volume_bounds_and_validation() {
+        let c = unit_cube();
+        assert!((c.signed_volume() - 1.0).abs() < 1e-12);
+        assert_eq!(c.bounds(), Some(([0.0; 3], [1.0; 3])));
+        let n = c.vertex_normals();
+        // The corner at the origin points into the negative octant.
+        assert!(n[0].iter().all(|&x| x < 0.0));
+        assert!(TriMesh::new(vec![[0.0; 3]], vec![[0, 0, 1]]).is_err());
+        assert!(TriMesh::new(vec![[f32::NAN, 0.0, 0.0]], vec![]).is_err());
+    }
+}
