@@ -1,5 +1,6 @@
 //! `irmirror`: reconstruct people from their thermal reflections. See `irmirror --help`.
 
+mod bench;
 mod body_cmd;
 mod demo;
 mod output;
@@ -43,6 +44,11 @@ enum Command {
         #[command(subcommand)]
         command: body_cmd::BodyCommand,
     },
+    /// Benchmarks that print a table.
+    Bench {
+        #[command(subcommand)]
+        command: bench::BenchCommand,
+    },
 }
 
 fn main() -> std::process::ExitCode {
@@ -62,6 +68,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Demo { out, seed } => demo::run(&out, seed, progress),
         Command::Body { command } => body_cmd::run(command, progress),
+        Command::Bench { command } => bench::run(command),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,66 @@
+//! `irmirror bench …`: performance tables (performance claims live here, not in tests).
+
+use anyhow::Result;
+use clap::Subcommand;
+use irmirror_body::{BodyGrad, BodyModel, OutputGrads, Phenotype, Pose};
+use irmirror_geom::nalgebra::Vector3;
+use std::time::Instant;
+
+/// Subcommands of `irmirror bench`.
+#[derive(Subcommand)]
+pub enum BenchCommand {
+    /// Body model: shape, forward (FK + LBS + keypoints) and backward, in f32.
+    Body {
+        /// Timed repetitions per row (the median is reported).
+        #[arg(long, default_value_t = 200)]
+        reps: usize,
+    },
+}
+
+fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
+    f(); // warm-up
+    let mut t: Vec<f64> = (0..reps.max(1))
+        .map(|_| {
+            let t0 = Instant::now();
+            f();
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+/// Runs a benchmark.
+pub fn run(cmd: BenchCommand) -> Result<()> {
+    match cmd {
+        BenchCommand::Body { reps } => {
+            let model = BodyModel::builtin()?;
+            let z: Vec<f32> = model.shape_coefficients(&Phenotype::default())?.iter().map(|&x| x as f32).collect();
+            let mut shaped = model.shaped(&z)?;
+            let rot: Vec<[f32; 3]> = (0..model.n_joints()).map(|c| [0.1 * (c % 3) as f32, -0.05, 0.07]).collect();
+            let pose = Pose::from_axis_angles(&rot, Vector3::new(0.0, 0.0, 1.0));
+            let mut posed = model.posed_buffers();
+            let gv = vec![Vector3::new(0.1f32, -0.2, 0.3); model.n_vertices()];
+            let mut grad = BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] };
+            let shape_ms = median_ms(|| shaped = model.shaped(&z).expect("valid z"), reps);
+            let fwd_ms = median_ms(|| model.pose_into(&shaped, &pose, &mut posed).expect("valid pose"), reps);
+            let bwd_ms = median_ms(
+                || model.backward(&shaped, &pose, &mut posed, OutputGrads { vertices: Some(&gv), ..Default::default() }, &mut grad),
+                reps,
+            );
+            println!(
+                "body model: {} vertices, {} joints, {} influences, shape rank {}, {} threads, f32, median of {reps}",
+                model.n_vertices(),
+                model.n_joints(),
+                model.asset.influences,
+                model.rank(),
+                rayon::current_num_threads()
+            );
+            println!("| step | ms |\n|---|---|");
+            println!("| shape (phenotype coefficients → rest mesh + joints) | {shape_ms:.3} |");
+            println!("| forward (FK + LBS + keypoints) | {fwd_ms:.3} |");
+            println!("| backward (keypoints, LBS, FK, shape VJPs) | {bwd_ms:.3} |");
+            Ok(())
+        }
+    }
+}

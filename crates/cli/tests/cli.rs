@@ -1,0 +1,108 @@
+//! The binary as a user meets it: exit codes, messages, determinism, atomic outputs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn irmirror(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_irmirror")).args(args).arg("--quiet").output().expect("binary runs")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let p = std::env::temp_dir().join(format!("irmirror-cli-{}-{name}", std::process::id()));
+    std::fs::remove_dir_all(&p).ok();
+    p
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn help_explains_every_command() {
+    let o = Command::new(env!("CARGO_BIN_EXE_irmirror")).arg("--help").output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    for cmd in ["demo", "body"] {
+        assert!(text.contains(cmd), "{text}");
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_irmirror")).args(["body", "--help"]).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    for cmd in ["import", "check", "sample"] {
+        assert!(text.contains(cmd), "{text}");
+    }
+}
+
+fn read_all(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn demo_is_deterministic_and_complete() {
+    let (a, b, c) = (tmp("demo-a"), tmp("demo-b"), tmp("demo-c"));
+    for (dir, seed) in [(&a, "5"), (&b, "5"), (&c, "6")] {
+        let o = irmirror(&["demo", "--out", dir.to_str().unwrap(), "--seed", seed]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let (fa, fb, fc) = (read_all(&a), read_all(&b), read_all(&c));
+    let names: Vec<&str> = fa.iter().map(|f| f.0.as_str()).collect();
+    assert_eq!(names, ["body.glb", "body.obj", "body.ply", "params.json", "preview.png", "report.html", "run.toml"]);
+    assert_eq!(fa, fb, "same seed, different output");
+    assert_ne!(fa, fc, "different seeds gave identical output");
+    // Re-running into an existing result replaces it and leaves no partial directory behind.
+    let o = irmirror(&["demo", "--out", a.to_str().unwrap(), "--seed", "6"]);
+    assert!(o.status.success());
+    assert_eq!(read_all(&a), fc);
+    let parent = a.parent().unwrap();
+    let leftovers = std::fs::read_dir(parent).unwrap().filter(|e| {
+        let n = e.as_ref().unwrap().file_name().to_string_lossy().into_owned();
+        n.contains(&format!("irmirror-cli-{}-demo", std::process::id())) && n.contains("partial")
+    });
+    assert_eq!(leftovers.count(), 0);
+    for d in [a, b, c] {
+        std::fs::remove_dir_all(d).ok();
+    }
+}
+
+#[test]
+fn bad_inputs_fail_cleanly() {
+    let vectors = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["body".into(), "import".into(), "--wheel".into(), "/nonexistent.whl".into(), "--out".into(), tmp("x.safetensors").display().to_string()], "/nonexistent.whl"),
+        (vec!["body".into(), "check".into(), "--vectors".into(), "/nonexistent.json".into()], "/nonexistent.json"),
+        (vec!["body".into(), "check".into(), "--vectors".into(), vectors.display().to_string(), "--asset".into(), "/nonexistent.safetensors".into()], "nonexistent.safetensors"),
+        (vec!["body".into(), "import".into(), "--wheel".into(), "x.whl".into(), "--out".into(), "y".into(), "--rank".into(), "zero".into()], "--rank"),
+    ];
+    for (args, expect) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = irmirror(&args);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        let e = stderr(&o);
+        assert!(e.contains("error") && e.contains(expect), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{e}");
+    }
+    // A corrupt asset.
+    let bad = tmp("bad.safetensors");
+    std::fs::write(&bad, b"\x08\x00\x00\x00\x00\x00\x00\x00{}garbage").unwrap();
+    let o = irmirror(&["body", "sample", "--out", tmp("s").to_str().unwrap(), "--asset", bad.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("bad.safetensors"), "{}", stderr(&o));
+    assert!(!tmp("s").exists(), "a failed run left an output directory");
+    std::fs::remove_file(bad).ok();
+}
+
+#[test]
+fn body_check_reports_the_builtin_asset_within_tolerance() {
+    let vectors = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
+    let o = irmirror(&["body", "check", "--vectors", vectors.to_str().unwrap(), "--tolerance-m", "5e-4"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("skipped") && out.contains("max error"), "{out}");
+    let o = irmirror(&["body", "check", "--vectors", vectors.to_str().unwrap(), "--tolerance-m", "1e-9"]);
+    assert!(!o.status.success(), "an impossible tolerance passed");
+}
