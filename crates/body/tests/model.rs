@@ -209,8 +209,7 @@ fn backward_with_keypoints_only_matches_a_direct_sum() {
 #[test]
 fn bad_parameters_are_clear_errors() {
     let m = model();
-    let mut ph = Phenotype::default();
-    ph.weight = 1.5;
+    let mut ph = Phenotype { weight: 1.5, ..Phenotype::default() };
     let e = m.shape_coefficients(&ph).unwrap_err().to_string();
     assert!(e.contains("phenotype.weight") && e.contains("outside [0, 1]"), "{e}");
     ph = Phenotype { age: 0.3, ..Phenotype::default() };

@@ -4,11 +4,29 @@ use anyhow::Result;
 use clap::Subcommand;
 use irmirror_body::{BodyGrad, BodyModel, OutputGrads, Phenotype, Pose};
 use irmirror_geom::nalgebra::Vector3;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Subcommands of `irmirror bench`.
 #[derive(Subcommand)]
 pub enum BenchCommand {
+    /// Reflection renderer: one forward + backward of the soft-IoU loss on the reference scene,
+    /// dense (every reflected ray × every triangle) and fast (BVH-culled), in one run.
+    Render {
+        /// The benchmark scene (DESIGN.md §7).
+        #[arg(long, default_value = "../shared/bench/scene_sphere160.json")]
+        scene: PathBuf,
+        /// Timed repetitions of the fast path (the median is reported).
+        #[arg(long, default_value_t = 50)]
+        reps: usize,
+        /// Skip the dense baseline (it takes seconds).
+        #[arg(long)]
+        no_dense: bool,
+        /// Culling thresholds ε to time, comma-separated (relative influence below which far
+        /// triangles are skipped); each is compared with the one dense run.
+        #[arg(long, value_delimiter = ',', default_values_t = [1e-4, 1e-7])]
+        epsilon: Vec<f64>,
+    },
     /// Body model: shape, forward (FK + LBS + keypoints) and backward, in f32.
     Body {
         /// Timed repetitions per row (the median is reported).
@@ -17,7 +35,7 @@ pub enum BenchCommand {
     },
 }
 
-fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
+pub(crate) fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
     f(); // warm-up
     let mut t: Vec<f64> = (0..reps.max(1))
         .map(|_| {
@@ -33,6 +51,7 @@ fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
 /// Runs a benchmark.
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
+        BenchCommand::Render { scene, reps, no_dense, epsilon } => crate::bench_render::run(&scene, reps, no_dense, &epsilon),
         BenchCommand::Body { reps } => {
             let model = BodyModel::builtin()?;
             let z: Vec<f32> = model.shape_coefficients(&Phenotype::default())?.iter().map(|&x| x as f32).collect();
@@ -64,3 +83,4 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         }
     }
 }
+

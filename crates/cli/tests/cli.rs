@@ -106,3 +106,17 @@ fn body_check_reports_the_builtin_asset_within_tolerance() {
     let o = irmirror(&["body", "check", "--vectors", vectors.to_str().unwrap(), "--tolerance-m", "1e-9"]);
     assert!(!o.status.success(), "an impossible tolerance passed");
 }
+
+#[test]
+fn benches_print_their_tables() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/bench/scene_sphere160.json");
+    let o = irmirror(&["bench", "render", "--scene", scene.to_str().unwrap(), "--no-dense", "--reps", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("6980 reflected rays") && out.contains("IoU 1.0000") && out.contains("| fast, ε = 1e-4"), "{out}");
+    let o = irmirror(&["bench", "render", "--scene", "/nonexistent/scene.json", "--no-dense"]);
+    assert!(!o.status.success() && stderr(&o).contains("/nonexistent/scene.json"));
+    let o = irmirror(&["bench", "body", "--reps", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("| backward"));
+}

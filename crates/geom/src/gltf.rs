@@ -45,7 +45,7 @@ pub fn write_glb(mesh: &TriMesh, path: &Path) -> Result<(), GeomError> {
         ]
     });
     let mut json_bytes = serde_json::to_vec(&doc).expect("a JSON value always serialises");
-    while json_bytes.len() % 4 != 0 {
+    while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();

@@ -1,0 +1,155 @@
+//! A bounding-volume hierarchy over a triangle mesh whose vertices move every iteration: built
+//! once (topology), refitted in O(n) after each vertex update, queried with inflated half-lines.
+
+use irmirror_geom::Real;
+use nalgebra::Vector3;
+
+/// Triangles per leaf at most.
+const LEAF_SIZE: usize = 4;
+/// Traversal stack depth (the tree is balanced by median splits: depth ≈ log2(n / 4) + 1).
+const STACK: usize = 64;
+
+#[derive(Clone, Copy, Debug)]
+struct Node<T: Real> {
+    lo: Vector3<T>,
+    hi: Vector3<T>,
+    /// Leaf: first index into `order`; inner: index of the left child.
+    first: u32,
+    /// Leaf: triangle count; inner: 0.
+    count: u32,
+    /// Inner: index of the right child.
+    right: u32,
+}
+
+/// The hierarchy. Node 0 is the root; children have larger indices than their parent, so a
+/// reverse sweep refits bottom-up.
+#[derive(Clone, Debug)]
+pub struct Bvh<T: Real> {
+    nodes: Vec<Node<T>>,
+    /// Triangle indices, leaf ranges point into this.
+    order: Vec<u32>,
+}
+
+impl<T: Real> Bvh<T> {
+    /// Builds over `triangles` of `vertices` (median split on the widest centroid axis).
+    pub fn build(vertices: &[Vector3<T>], triangles: &[[u32; 3]]) -> Self {
+        let centroids: Vec<Vector3<T>> = triangles
+            .iter()
+            .map(|t| (vertices[t[0] as usize] + vertices[t[1] as usize] + vertices[t[2] as usize]) / T::of(3.0))
+            .collect();
+        let mut bvh = Self { nodes: Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1), order: (0..triangles.len() as u32).collect() };
+        if !triangles.is_empty() {
+            bvh.split(0, triangles.len(), &centroids);
+            bvh.refit(vertices, triangles);
+        }
+        bvh
+    }
+
+    fn split(&mut self, start: usize, end: usize, centroids: &[Vector3<T>]) -> u32 {
+        let id = self.nodes.len() as u32;
+        self.nodes.push(Node { lo: Vector3::zeros(), hi: Vector3::zeros(), first: start as u32, count: (end - start) as u32, right: 0 });
+        if end - start <= LEAF_SIZE {
+            return id;
+        }
+        let (mut lo, mut hi) = (centroids[self.order[start] as usize], centroids[self.order[start] as usize]);
+        for &t in &self.order[start..end] {
+            lo = lo.inf(&centroids[t as usize]);
+            hi = hi.sup(&centroids[t as usize]);
+        }
+        let axis = (hi - lo).imax();
+        let mid = (start + end) / 2;
+        self.order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
+            centroids[a as usize][axis].partial_cmp(&centroids[b as usize][axis]).unwrap_or(std::cmp::Ordering::Equal)
+        });
+        let left = self.split(start, mid, centroids);
+        let right = self.split(mid, end, centroids);
+        let node = &mut self.nodes[id as usize];
+        node.first = left;
+        node.count = 0;
+        node.right = right;
+        id
+    }
+
+    /// Recomputes every box for new vertex positions (same topology).
+    pub fn refit(&mut self, vertices: &[Vector3<T>], triangles: &[[u32; 3]]) {
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            let (lo, hi) = if n.count > 0 {
+                let mut lo = Vector3::repeat(T::max_value().unwrap_or(T::one()));
+                let mut hi = -lo;
+                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
+                    for &v in &triangles[t as usize] {
+                        lo = lo.inf(&vertices[v as usize]);
+                        hi = hi.sup(&vertices[v as usize]);
+                    }
+                }
+                (lo, hi)
+            } else {
+                let (l, r) = (self.nodes[n.first as usize], self.nodes[n.right as usize]);
+                (l.lo.inf(&r.lo), l.hi.sup(&r.hi))
+            };
+            self.nodes[i].lo = lo;
+            self.nodes[i].hi = hi;
+        }
+    }
+
+    /// Calls `visit(triangle)` for every triangle whose box, inflated by `radius`, meets the
+    /// half-line `o + s r`, `s ≥ 0`. `inv_r` is `1 / r` per component. No allocation.
+    pub fn for_each_near_ray(&self, o: &Vector3<T>, inv_r: &Vector3<T>, radius: T, mut visit: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = [0u32; STACK];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let n = &self.nodes[stack[top] as usize];
+            if !slab_hit(&(n.lo.add_scalar(-radius)), &(n.hi.add_scalar(radius)), o, inv_r) {
+                continue;
+            }
+            if n.count > 0 {
+                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
+                    visit(t);
+                }
+            } else {
+                debug_assert!(top + 2 <= STACK);
+                stack[top] = n.right;
+                stack[top + 1] = n.first;
+                top += 2;
+            }
+        }
+    }
+
+    /// Number of nodes (for tests and statistics).
+    pub fn n_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+}
+
+/// Does the half-line `o + s r`, `s ≥ 0`, meet the box `[lo, hi]`?
+#[inline]
+fn slab_hit<T: Real>(lo: &Vector3<T>, hi: &Vector3<T>, o: &Vector3<T>, inv_r: &Vector3<T>) -> bool {
+    let mut t0 = T::zero();
+    let mut t1 = T::max_value().unwrap_or(T::one());
+    for k in 0..3 {
+        if inv_r[k].is_finite() {
+            let a = (lo[k] - o[k]) * inv_r[k];
+            let b = (hi[k] - o[k]) * inv_r[k];
+            let (near, far) = if a < b { (a, b) } else { (b, a) };
+            t0 = t0.max(near);
+            t1 = t1.min(far);
+            if t0 > t1 {
+                return false;
+            }
+        } else if o[k] < lo[k] || o[k] > hi[k] {
+            // Parallel to this slab and outside it.
+            return false;
+        }
+    }
+    true
+}
+
+/// Component-wise reciprocal of a direction (infinite where a component is zero).
+pub fn inverse_dir<T: Real>(r: &Vector3<T>) -> Vector3<T> {
+    r.map(|x| T::one() / x)
+}

@@ -1,0 +1,197 @@
+//! Soft occupancy: gradients against finite differences (f64), culled vs dense, limits and
+//! invariances, and the benchmark scene's hard mask.
+
+use irmirror_geom::rotation::axis_angle_to_matrix;
+use irmirror_render::hard::hard_mask;
+use irmirror_render::{Culling, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer, soft_iou_loss};
+use nalgebra::Vector3;
+use rand::{Rng, SeedableRng};
+
+type V = Vector3<f64>;
+
+/// A small random scene: a bumpy closed-ish blob of triangles near z = 1 and a 12×10 "image" of
+/// rays from around the origin towards it (one ray per pixel; a few pixels without rays).
+fn scene(seed: u64) -> (Vec<V>, Vec<[u32; 3]>, ReflectedRays<f64>, Vec<f64>) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (nx, ny) = (5, 4);
+    let mut verts = Vec::new();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            verts.push(V::new(i as f64 * 0.03 - 0.075 + rng.random_range(-0.004..0.004), j as f64 * 0.03 - 0.06 + rng.random_range(-0.004..0.004), 1.0 + rng.random_range(-0.02..0.02)));
+        }
+    }
+    let mut tris = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            let a = (j * (nx + 1) + i) as u32;
+            let (b, c, d) = (a + 1, a + (nx as u32 + 1), a + nx as u32 + 2);
+            tris.push([a, b, d]);
+            tris.push([a, d, c]);
+        }
+    }
+    let (w, h) = (12u32, 10u32);
+    let mut rays = ReflectedRays { width: w, height: h, ..Default::default() };
+    for p in 0..w * h {
+        if p % 17 == 5 {
+            continue; // pixels whose camera ray missed the object
+        }
+        let (x, y) = ((p % w) as f64, (p / w) as f64);
+        let o = V::new(rng.random_range(-0.01..0.01), rng.random_range(-0.01..0.01), 0.0);
+        let aim = V::new((x - 5.5) * 0.02 + 0.0031, (y - 4.5) * 0.02 + 0.0017, 1.0);
+        rays.pixel.push(p);
+        rays.object.push(0);
+        rays.origin.push(o);
+        rays.dir.push((aim - o).normalize());
+        rays.normal.push(V::z());
+    }
+    let target: Vec<f64> = (0..w * h).map(|p| if (p % w) > 3 && (p % w) < 10 && (p / w) > 2 { 1.0 } else { 0.0 }).collect();
+    (verts, tris, rays, target)
+}
+
+fn loss(verts: &[V], tris: &[[u32; 3]], rays: &ReflectedRays<f64>, target: &[f64], p: &OccupancyParams, c: Culling) -> f64 {
+    let r = SoftRenderer::new(verts, tris);
+    let occ = r.forward(rays, p, c);
+    soft_iou_loss(rays, &occ.value, target, &mut Vec::new())
+}
+
+fn loss_and_grad(verts: &[V], tris: &[[u32; 3]], rays: &ReflectedRays<f64>, target: &[f64], p: &OccupancyParams, c: Culling) -> (f64, OccupancyGrad<f64>, Vec<f64>) {
+    let mut r = SoftRenderer::new(verts, tris);
+    let occ = r.forward(rays, p, c);
+    let mut d = Vec::new();
+    let l = soft_iou_loss(rays, &occ.value, target, &mut d);
+    let mut g = OccupancyGrad::default();
+    r.backward(rays, &occ, &d, p, c, &mut g);
+    (l, g, occ.value)
+}
+
+#[test]
+fn gradients_match_finite_differences() {
+    // σ = (1 cm)² against 3 cm triangles: D is neither saturated nor negligible for most pairs;
+    // rays are jittered off edges and vertices, so the closest-point maps are smooth here.
+    let p = OccupancyParams { sigma_m2: 1e-4, epsilon: 1e-4 };
+    for culling in [Culling::Dense, Culling::Bvh] {
+        let (verts, tris, rays, target) = scene(1);
+        let (l0, g, _) = loss_and_grad(&verts, &tris, &rays, &target, &p, culling);
+        assert!(l0 > 0.05 && l0 < 0.95, "loss {l0}");
+        let h = 1e-7;
+        let mut checked = 0;
+        for vi in (0..verts.len()).step_by(3) {
+            for k in 0..3 {
+                let (mut vp, mut vm) = (verts.clone(), verts.clone());
+                vp[vi][k] += h;
+                vm[vi][k] -= h;
+                let fd = (loss(&vp, &tris, &rays, &target, &p, culling) - loss(&vm, &tris, &rays, &target, &p, culling)) / (2.0 * h);
+                assert!((fd - g.vertices[vi][k]).abs() < 1e-5 * (1.0 + fd.abs()), "{culling:?} vertex {vi}[{k}]: fd {fd} vs {}", g.vertices[vi][k]);
+                checked += usize::from(fd.abs() > 1e-3);
+            }
+        }
+        assert!(checked > 10, "too few vertices with a visible gradient");
+        for i in (0..rays.len()).step_by(7) {
+            for k in 0..3 {
+                let (mut rp, mut rm) = (rays.clone(), rays.clone());
+                rp.origin[i][k] += h;
+                rm.origin[i][k] -= h;
+                let fd = (loss(&verts, &tris, &rp, &target, &p, culling) - loss(&verts, &tris, &rm, &target, &p, culling)) / (2.0 * h);
+                assert!((fd - g.origin[i][k]).abs() < 1e-5 * (1.0 + fd.abs()), "origin {i}[{k}]: fd {fd} vs {}", g.origin[i][k]);
+                let (mut rp, mut rm) = (rays.clone(), rays.clone());
+                rp.dir[i][k] += h;
+                rm.dir[i][k] -= h;
+                let fd = (loss(&verts, &tris, &rp, &target, &p, culling) - loss(&verts, &tris, &rm, &target, &p, culling)) / (2.0 * h);
+                assert!((fd - g.dir[i][k]).abs() < 1e-5 * (1.0 + fd.abs()), "dir {i}[{k}]: fd {fd} vs {}", g.dir[i][k]);
+            }
+        }
+    }
+}
+
+#[test]
+fn culled_equals_dense_on_random_scenes() {
+    for seed in 0..8 {
+        let (verts, tris, rays, target) = scene(seed);
+        // ε = 1e-7: the culled pairs' total influence is then far below the 1e-5 tolerance.
+        let p = OccupancyParams { sigma_m2: 4e-5, epsilon: 1e-7 };
+        let (ld, gd, id) = loss_and_grad(&verts, &tris, &rays, &target, &p, Culling::Dense);
+        let (lc, gc, ic) = loss_and_grad(&verts, &tris, &rays, &target, &p, Culling::Bvh);
+        assert!((ld - lc).abs() < 1e-5, "seed {seed}: loss {ld} vs {lc}");
+        let max = gd.vertices.iter().map(|v| v.amax()).fold(0.0, f64::max);
+        for (a, b) in gd.vertices.iter().zip(&gc.vertices) {
+            assert!((a - b).amax() <= 1e-5 * max.max(1.0), "seed {seed}: {a:?} vs {b:?}");
+        }
+        for (a, b) in id.iter().zip(&ic) {
+            assert!((a - b).abs() < 1e-5);
+        }
+        // With the default ε = 1e-4 every ray's occupancy is within (culled pairs) × ε.
+        let p4 = OccupancyParams { sigma_m2: 4e-5, epsilon: 1e-4 };
+        let (_, _, id4) = loss_and_grad(&verts, &tris, &rays, &target, &p4, Culling::Dense);
+        let (_, _, ic4) = loss_and_grad(&verts, &tris, &rays, &target, &p4, Culling::Bvh);
+        for (a, b) in id4.iter().zip(&ic4) {
+            assert!((a - b).abs() <= tris.len() as f64 * 1e-4 && b <= a);
+        }
+    }
+}
+
+#[test]
+fn occupancy_is_a_probability_and_tends_to_the_hard_mask() {
+    let (verts, tris, rays, _) = scene(3);
+    for sigma in [1e-2, 1e-4, 1e-6] {
+        let r = SoftRenderer::new(&verts, &tris);
+        let occ = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-4 }, Culling::Bvh);
+        assert!(occ.value.iter().all(|&v| (0.0..=1.0).contains(&v)));
+    }
+    let r = SoftRenderer::new(&verts, &tris);
+    let hard = hard_mask(&rays, r.bvh(), &verts, &tris);
+    let occ = r.forward(&rays, &OccupancyParams { sigma_m2: 1e-10, epsilon: 1e-4 }, Culling::Bvh);
+    let mut n_hit = 0;
+    for (i, &v) in occ.value.iter().enumerate() {
+        let h = hard[rays.pixel[i] as usize];
+        n_hit += usize::from(h);
+        assert!((v - if h { 1.0 } else { 0.0 }).abs() < 1e-3, "ray {i}: soft {v}, hard {h}");
+    }
+    assert!(n_hit > 10 && n_hit < rays.len() - 10);
+}
+
+#[test]
+fn rigid_motion_of_mesh_and_rays_leaves_occupancy_unchanged() {
+    let (verts, tris, rays, _) = scene(4);
+    let p = OccupancyParams::default();
+    let base = SoftRenderer::new(&verts, &tris).forward(&rays, &p, Culling::Bvh).value;
+    let rot = axis_angle_to_matrix(&V::new(0.4, -1.2, 0.3));
+    let t = V::new(1.0, -2.0, 0.5);
+    let moved: Vec<V> = verts.iter().map(|v| rot * v + t).collect();
+    let mut mrays = rays.clone();
+    mrays.origin.iter_mut().for_each(|o| *o = rot * *o + t);
+    mrays.dir.iter_mut().for_each(|d| *d = rot * *d);
+    let after = SoftRenderer::new(&moved, &tris).forward(&mrays, &p, Culling::Bvh).value;
+    for (a, b) in base.iter().zip(&after) {
+        assert!((a - b).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn refit_after_moving_vertices_matches_a_rebuild() {
+    let (verts, tris, rays, target) = scene(5);
+    let p = OccupancyParams::default();
+    let moved: Vec<V> = verts.iter().map(|v| v + V::new(0.02, -0.01, 0.05)).collect();
+    let mut r = SoftRenderer::new(&verts, &tris);
+    r.set_vertices(&moved);
+    let refit = r.forward(&rays, &p, Culling::Bvh).value;
+    let fresh = SoftRenderer::new(&moved, &tris).forward(&rays, &p, Culling::Bvh).value;
+    assert_eq!(refit, fresh);
+    let _ = target;
+}
+
+#[test]
+fn degenerate_triangles_and_grazing_rays_stay_finite() {
+    let verts = vec![V::new(0.0, 0.0, 1.0), V::new(0.0, 0.0, 1.0), V::new(0.0, 0.0, 1.0), V::new(0.1, 0.0, 1.0), V::new(0.2, 0.0, 1.0)];
+    let tris = vec![[0, 1, 2], [0, 3, 4], [1, 3, 4]];
+    let mut rays = ReflectedRays { width: 2, height: 1, ..Default::default() };
+    for (p, o, d) in [(0u32, V::new(-1.0, 0.0, 1.0), V::new(1.0, 0.0, 0.0)), (1, V::new(0.05, 0.0, 0.0), V::new(0.0, 0.0, 1.0))] {
+        rays.pixel.push(p);
+        rays.object.push(0);
+        rays.origin.push(o);
+        rays.dir.push(d);
+        rays.normal.push(V::z());
+    }
+    let (l, g, v) = loss_and_grad(&verts, &tris, &rays, &[1.0, 0.0], &OccupancyParams::default(), Culling::Bvh);
+    assert!(l.is_finite() && v.iter().all(|x| x.is_finite()));
+    assert!(g.vertices.iter().chain(&g.origin).chain(&g.dir).all(|x| x.iter().all(|c| c.is_finite())));
+}
