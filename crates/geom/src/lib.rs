@@ -17,6 +17,7 @@
 pub mod camera;
 pub mod error;
 pub mod gltf;
+pub mod isosurface;
 pub mod mesh;
 pub mod obj;
 pub mod ply;

@@ -1,0 +1,295 @@
+//! Scene files and the presets that generate them from a seed.
+//!
+//! The scene's own frame ("world") is Z up, metres, floor at z = 0; cameras are placed by
+//! `world_from_camera` (OpenCV camera axes). Everything is converted to the depth-camera frame
+//! before rendering.
+
+use crate::shapes::Shape;
+use irmirror_body::Phenotype;
+use irmirror_geom::rotation::axis_angle_to_matrix;
+use irmirror_geom::transform::RigidFile;
+use irmirror_geom::{PinholeCamera, Rigid3};
+use nalgebra::{Matrix3, Vector3};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// A complete scene description (TOML or JSON).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// Room (walls, air) temperature, °C.
+    pub ambient_c: f64,
+    /// The depth camera (the reconstruction frame) and its pose in the world.
+    pub depth_camera: PlacedCamera,
+    /// The thermal camera's intrinsics and `depth_from_thermal`.
+    pub thermal_camera: ThermalCamera,
+    /// The evaluation camera that sees the person (written to `truth/` only).
+    pub third_camera: PlacedCamera,
+    /// Optional table (a horizontal rectangle).
+    #[serde(default)]
+    pub table: Option<Table>,
+    /// The reflecting objects.
+    pub objects: Vec<SceneObject>,
+    /// The person.
+    pub person: Person,
+    /// Extra heat sources (black spheres).
+    #[serde(default)]
+    pub heat_sources: Vec<HeatSource>,
+    /// Sensor models.
+    #[serde(default)]
+    pub sensor: Sensor,
+}
+
+/// A camera and its pose.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PlacedCamera {
+    /// Intrinsics.
+    #[serde(flatten)]
+    pub intrinsics: PinholeCamera,
+    /// Camera frame → world frame.
+    pub world_from_camera: RigidFile,
+}
+
+/// The thermal camera.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ThermalCamera {
+    /// Intrinsics.
+    #[serde(flatten)]
+    pub intrinsics: PinholeCamera,
+    /// Thermal frame → depth frame.
+    pub depth_from_thermal: RigidFile,
+}
+
+/// A table top.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Table {
+    /// Height of the top, m.
+    pub height_m: f64,
+    /// Centre (x, y) in the world, m.
+    pub centre_m: [f64; 2],
+    /// Size (x, y), m.
+    pub size_m: [f64; 2],
+    /// Temperature, °C.
+    pub temp_c: f64,
+    /// LWIR emissivity (wood, laminate ≈ 0.9–0.95).
+    pub emissivity: f64,
+}
+
+/// A reflecting object.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SceneObject {
+    /// Shape and parameters.
+    pub shape: Shape,
+    /// Base centre (x, y) and the height it stands on (z), world, m.
+    pub base_m: [f64; 3],
+    /// Rotation about the world Z axis, rad.
+    pub yaw_rad: f64,
+    /// Metres per object unit (≈ half the object's size).
+    pub scale_m: f64,
+    /// LWIR emissivity (glazed ceramic 0.90–0.92, car paint 0.92–0.94, polished steel 0.07).
+    pub emissivity: f64,
+    /// Temperature, °C.
+    pub temp_c: f64,
+}
+
+/// How the person stands.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Person {
+    /// Body shape.
+    pub phenotype: Phenotype,
+    /// Joint rotation vectors (36 × 3, rad, world-aligned rest axes); root = global.
+    pub rotvec_rad: Vec<[f64; 3]>,
+    /// Name of the pose (documentation only).
+    #[serde(default)]
+    pub pose_name: String,
+    /// Floor position (x, y) of the body's centre, world, m.
+    pub position_m: [f64; 2],
+    /// Heading about world Z, rad (0: the person faces −Y of the world).
+    pub yaw_rad: f64,
+    /// Exposed skin temperature, °C (≈ 34).
+    pub skin_c: f64,
+    /// Clothing surface temperature, °C (≈ 28–31).
+    pub clothing_c: f64,
+}
+
+/// A heat source (black body sphere).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct HeatSource {
+    /// Centre, world, m.
+    pub centre_m: [f64; 3],
+    /// Radius, m.
+    pub radius_m: f64,
+    /// Temperature, °C.
+    pub temp_c: f64,
+}
+
+/// Sensor models.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sensor {
+    /// Thermal noise-equivalent temperature difference, mK (Gaussian, per pixel).
+    pub netd_mk: f64,
+    /// Optics blur, Gaussian σ in pixels (0: none).
+    pub blur_px: f64,
+    /// Sub-pixel rays per axis (total s²).
+    pub supersample: u32,
+    /// ADC bits of the raw thermal counts.
+    pub bits: u32,
+    /// Depth noise σ = `depth_noise_per_m2 · z²`, m (structured light ≈ 1.5e-3).
+    pub depth_noise_per_m2: f64,
+    /// Depth dropouts where |cos(incidence)| is below this.
+    pub depth_grazing_cos: f64,
+    /// Probability of a hole at a depth discontinuity (> 3 cm between neighbours).
+    pub depth_edge_hole: f64,
+}
+
+impl Default for Sensor {
+    fn default() -> Self {
+        Self { netd_mk: 50.0, blur_px: 0.5, supersample: 2, bits: 14, depth_noise_per_m2: 1.5e-3, depth_grazing_cos: 0.1, depth_edge_hole: 0.5 }
+    }
+}
+
+impl Sensor {
+    /// An ideal sensor (no noise, blur, dropouts; one ray per pixel) for tests.
+    pub fn ideal() -> Self {
+        Self { netd_mk: 0.0, blur_px: 0.0, supersample: 1, bits: 16, depth_noise_per_m2: 0.0, depth_grazing_cos: 0.0, depth_edge_hole: 0.0 }
+    }
+}
+
+/// Thermal camera presets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ThermalPreset {
+    /// FLIR Lepton 3.5-like: 160×120, 57° HFOV.
+    Lepton,
+    /// FLIR Boson-like: 640×512, 50° HFOV.
+    Boson,
+}
+
+impl ThermalPreset {
+    /// The intrinsics.
+    pub fn camera(self) -> PinholeCamera {
+        match self {
+            ThermalPreset::Lepton => PinholeCamera::from_fov(160, 120, 57f64.to_radians()),
+            ThermalPreset::Boson => PinholeCamera::from_fov(640, 512, 50f64.to_radians()),
+        }
+        .expect("preset intrinsics are valid")
+    }
+}
+
+/// A camera at `eye` looking at `target` (world Z up), as `world_from_camera`.
+pub fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Rigid3<f64> {
+    let z = (target - eye).normalize();
+    let up = Vector3::z();
+    let x = z.cross(&up).try_normalize(1e-9).unwrap_or_else(Vector3::x);
+    let y = z.cross(&x);
+    Rigid3 { rotation: Matrix3::from_columns(&[x, y, z]), translation: eye }
+}
+
+fn small_baseline() -> RigidFile {
+    // Thermal camera 4 cm to the right of the depth camera, parallel axes.
+    RigidFile::from_rigid(&Rigid3 { rotation: Matrix3::identity(), translation: Vector3::new(0.04, 0.0, 0.0) })
+}
+
+/// The tabletop preset: 1–3 bowls and mugs on a table seen from above by the cameras, and a
+/// person 1–3 m away, usually outside both cameras' view.
+pub fn tabletop(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenotype, thermal: ThermalPreset) -> SceneFile {
+    let table = Table { height_m: 0.75, centre_m: [0.0, 0.0], size_m: [1.4, 0.9], temp_c: 22.0, emissivity: 0.93 };
+    // Cameras 0.55 m above the table, 0.45 m back, looking at the table centre.
+    let eye = Vector3::new(0.0, 0.45, 0.75 + 0.55);
+    let world_from_depth = look_at(eye, Vector3::new(0.0, -0.05, 0.75));
+    let n_objects = rng.random_range(1..=3);
+    let mut objects: Vec<SceneObject> = Vec::new();
+    while objects.len() < n_objects {
+        let bowl = rng.random_bool(0.5);
+        let (shape, scale) = if bowl {
+            (Shape::Bowl { cut: rng.random_range(-0.2..0.05), wall: rng.random_range(0.04..0.08) }, rng.random_range(0.08..0.12))
+        } else {
+            (Shape::Mug { aspect: rng.random_range(0.9..1.3), wall: rng.random_range(0.08..0.14) }, rng.random_range(0.06..0.08))
+        };
+        let base = [rng.random_range(-0.2..0.2), rng.random_range(-0.18..0.08), 0.75];
+        if objects.iter().any(|o| ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt() < o.scale_m + scale + 0.02) {
+            continue;
+        }
+        objects.push(SceneObject { shape, base_m: base, yaw_rad: rng.random_range(-3.1..3.1), scale_m: scale, emissivity: 0.91, temp_c: 22.0 });
+    }
+    // The person stands behind the cameras (so only reflections show them), 1–3 m from the table.
+    let dist = rng.random_range(0.5..1.5);
+    let angle: f64 = rng.random_range(-0.6..0.6);
+    let position = [dist * angle.sin(), 0.45 + dist * angle.cos()];
+    let person = Person {
+        phenotype,
+        rotvec_rad: pose.1,
+        pose_name: pose.0,
+        position_m: position,
+        // Facing the table (towards −Y), give or take.
+        yaw_rad: rng.random_range(-0.4..0.4),
+        skin_c: 34.0,
+        clothing_c: 30.0,
+    };
+    let third = look_at(Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4), Vector3::new(position[0], position[1], 0.9));
+    SceneFile {
+        ambient_c: 22.0,
+        depth_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 70f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&world_from_depth) },
+        thermal_camera: ThermalCamera { intrinsics: thermal.camera(), depth_from_thermal: small_baseline() },
+        third_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 60f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&third) },
+        table: Some(table),
+        objects,
+        person,
+        heat_sources: vec![],
+        sensor: Sensor::default(),
+    }
+}
+
+/// The car preset: the side of a car seen from 2–3 m, a pedestrian 2–8 m away from the car.
+pub fn car(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenotype, thermal: ThermalPreset) -> SceneFile {
+    let length = 4.5;
+    let car = SceneObject {
+        shape: Shape::Car { cabin: rng.random_range(0.45..0.7), height: rng.random_range(0.28..0.36) },
+        base_m: [0.0, 0.0, 0.0],
+        yaw_rad: 0.0,
+        scale_m: length / 1.9,
+        emissivity: 0.93,
+        temp_c: 20.0,
+    };
+    // Cameras 1.5 m from the car's side (y ≈ −0.95 m) at 1.2 m height, looking at the door.
+    let eye = Vector3::new(rng.random_range(-0.5..0.5), -2.45, 1.2);
+    let world_from_depth = look_at(eye, Vector3::new(eye.x, 0.0, 0.8));
+    // Pedestrian behind the cameras, 2.5–8 m from the car, where the door's mirror image of
+    // them falls inside the thermal camera's view (|Δx| < 0.4 × image distance).
+    let dist = rng.random_range(2.5..8.0);
+    let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    let lateral: f64 = side * rng.random_range(0.5..(0.4 * (dist + 0.6f64)).max(0.6));
+    let position = [eye.x + lateral, -0.95 - dist];
+    let person = Person {
+        phenotype,
+        rotvec_rad: pose.1,
+        pose_name: pose.0,
+        position_m: position,
+        yaw_rad: rng.random_range(-3.1..3.1),
+        skin_c: 34.0,
+        clothing_c: 28.0,
+    };
+    let third = look_at(Vector3::new(position[0] + side * 3.0, position[1] - 2.0, 1.6), Vector3::new(position[0], position[1], 0.9));
+    SceneFile {
+        ambient_c: 18.0,
+        depth_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 70f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&world_from_depth) },
+        thermal_camera: ThermalCamera { intrinsics: thermal.camera(), depth_from_thermal: small_baseline() },
+        third_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 60f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&third) },
+        table: None,
+        objects: vec![car],
+        person,
+        heat_sources: vec![],
+        sensor: Sensor::default(),
+    }
+}
+
+/// A rotation about world Z.
+pub fn yaw(angle_rad: f64) -> Matrix3<f64> {
+    axis_angle_to_matrix(&Vector3::new(0.0, 0.0, angle_rad))
+}

@@ -1,0 +1,176 @@
+//! Object shapes for the simulator: analytic SDFs in the normalised object frame (+Y up, unit
+//! sphere), with documented parameters. Procedural families for learned priors come with the
+//! object-prior work; these serve scenes and tests today.
+
+use irmirror_render::sdf::{Bowl, Sdf};
+use nalgebra::{Vector2, Vector3};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// A shape and its parameters (object units; the object is scaled to metres when placed).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "category", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Shape {
+    /// A sphere of radius 1 (a mirror ball; the renderer benchmark's reflector).
+    Sphere,
+    /// Thin-walled bowl: a spherical shell cut by the rim plane.
+    Bowl {
+        /// Rim height above the sphere centre, in shell radii (−0.6 shallow … 0.3 deep).
+        cut: f64,
+        /// Wall thickness, in shell radii.
+        wall: f64,
+    },
+    /// Cylindrical mug with a bottom and a torus handle.
+    Mug {
+        /// Height over diameter.
+        aspect: f64,
+        /// Wall thickness over radius.
+        wall: f64,
+    },
+    /// A car body: lower body and cabin, smoothly joined; +X is the front.
+    Car {
+        /// Cabin length over body length (sedan ≈ 0.5, hatchback ≈ 0.6, SUV ≈ 0.7).
+        cabin: f64,
+        /// Height over length.
+        height: f64,
+    },
+}
+
+impl Shape {
+    /// The category name used in captures.
+    pub fn category(&self) -> &'static str {
+        match self {
+            Shape::Sphere => "sphere",
+            Shape::Bowl { .. } => "bowl",
+            Shape::Mug { .. } => "mug",
+            Shape::Car { .. } => "car",
+        }
+    }
+
+    /// The signed distance field.
+    pub fn sdf(&self) -> Arc<dyn Sdf> {
+        match *self {
+            Shape::Sphere => Arc::new(irmirror_render::sdf::Sphere { radius: 1.0 }),
+            Shape::Bowl { cut, wall } => {
+                // Shell radius so that the bowl fits the unit sphere.
+                let r = 0.95;
+                Arc::new(Bowl { radius: r, cut_height: cut * r, half_thickness: 0.5 * wall * r })
+            }
+            Shape::Mug { aspect, wall } => {
+                // Fit height 2h and radius ρ (with handle) into the unit sphere.
+                let rho = 0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2;
+                Arc::new(Mug { radius: rho, half_height: aspect * rho, wall: wall * rho })
+            }
+            Shape::Car { cabin, height } => Arc::new(Car { cabin, height }),
+        }
+    }
+
+    /// Lowest object-frame y of the surface (to stand the object on a support plane).
+    pub fn base_y(&self) -> f64 {
+        match *self {
+            Shape::Sphere => -1.0,
+            Shape::Bowl { wall, .. } => -0.95 - 0.5 * wall * 0.95,
+            Shape::Mug { aspect, .. } => -aspect * 0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2,
+            Shape::Car { height, .. } => -height * 0.95,
+        }
+    }
+}
+
+fn capped_cylinder(p: &Vector3<f64>, radius: f64, y0: f64, y1: f64) -> f64 {
+    let d = Vector2::new(Vector2::new(p.x, p.z).norm() - radius, (p.y - 0.5 * (y0 + y1)).abs() - 0.5 * (y1 - y0));
+    d.x.max(d.y).min(0.0) + Vector2::new(d.x.max(0.0), d.y.max(0.0)).norm()
+}
+
+/// Cylindrical mug, +Y up, bottom at `−half_height`, open at the top, handle towards +X.
+#[derive(Clone, Copy, Debug)]
+pub struct Mug {
+    /// Outer radius.
+    pub radius: f64,
+    /// Half the height.
+    pub half_height: f64,
+    /// Wall (and bottom) thickness.
+    pub wall: f64,
+}
+
+impl Sdf for Mug {
+    fn distance(&self, p: &Vector3<f64>) -> f64 {
+        let h = self.half_height;
+        let outer = capped_cylinder(p, self.radius, -h, h);
+        let cavity = capped_cylinder(p, self.radius - self.wall, -h + self.wall, h + 1.0);
+        let shell = outer.max(-cavity);
+        // Handle: a torus in the XY plane beside the wall, clipped to outside the wall.
+        let c = Vector2::new(self.radius, 0.0);
+        let big = 0.45 * h;
+        let q = Vector2::new((Vector2::new(p.x, p.y) - c).norm() - big, p.z);
+        let handle = (q.norm() - 0.35 * self.wall.max(0.05)).max(self.radius - 0.5 * self.wall - p.x);
+        shell.min(handle)
+    }
+    fn bounding_radius(&self) -> f64 {
+        ((self.radius + 0.45 * self.half_height + 0.1).powi(2) + self.half_height.powi(2)).sqrt()
+    }
+}
+
+fn rounded_box(p: &Vector3<f64>, half: &Vector3<f64>, r: f64) -> f64 {
+    let q = p.abs() - half + Vector3::repeat(r);
+    q.sup(&Vector3::zeros()).norm() + q.x.max(q.y.max(q.z)).min(0.0) - r
+}
+
+/// A smooth car body in the unit sphere: length 1.9 along X (+X front), +Y up.
+#[derive(Clone, Copy, Debug)]
+pub struct Car {
+    /// Cabin length over body length.
+    pub cabin: f64,
+    /// Total height over length.
+    pub height: f64,
+}
+
+impl Sdf for Car {
+    fn distance(&self, p: &Vector3<f64>) -> f64 {
+        let (len, h) = (0.95, self.height * 0.95 * 2.0);
+        let lower_h = 0.55 * h;
+        let body = rounded_box(&(p - Vector3::new(0.0, -h / 2.0 + lower_h / 2.0, 0.0)), &Vector3::new(len, lower_h / 2.0, 0.4), 0.12);
+        let cab_h = h - lower_h;
+        let cabin = rounded_box(
+            &(p - Vector3::new(-0.1 * len, -h / 2.0 + lower_h + cab_h / 2.0 - 0.05, 0.0)),
+            &Vector3::new(self.cabin * len, cab_h / 2.0 + 0.05, 0.36),
+            0.15,
+        );
+        // Polynomial smooth union (k = 0.12): keeps the body a smooth mirror.
+        let k = 0.12;
+        let hh = (k - (body - cabin).abs()).max(0.0) / k;
+        body.min(cabin) - hh * hh * k * 0.25
+    }
+    fn bounding_radius(&self) -> f64 {
+        1.1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shapes_fit_the_unit_sphere_and_stand_on_their_base() {
+        for s in [Shape::Bowl { cut: 0.0, wall: 0.06 }, Shape::Mug { aspect: 1.1, wall: 0.1 }, Shape::Car { cabin: 0.5, height: 0.3 }] {
+            let sdf = s.sdf();
+            // Far points are outside; the base point is on the surface.
+            assert!(sdf.distance(&Vector3::new(0.0, 0.0, 1.2)) > 0.0);
+            let r = sdf.bounding_radius();
+            for dir in [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x(), -Vector3::y(), -Vector3::z()] {
+                assert!(sdf.distance(&(dir * (r + 1e-3))) > 0.0, "{s:?} pokes out of its bounding sphere");
+            }
+            let m = irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), Vector3::repeat(-1.0), Vector3::repeat(1.0), 48);
+            let ymin = m.vertices.iter().map(|v| f64::from(v[1])).fold(f64::MAX, f64::min);
+            assert!((ymin - s.base_y()).abs() < 0.03, "{s:?}: base {ymin} vs {}", s.base_y());
+            assert!(m.signed_volume() > 0.0);
+        }
+    }
+
+    #[test]
+    fn mug_is_open_and_hollow() {
+        let m = Mug { radius: 0.5, half_height: 0.5, wall: 0.05 };
+        assert!(m.distance(&Vector3::new(0.0, 0.0, 0.0)) > 0.3, "cavity");
+        assert!(m.distance(&Vector3::new(0.0, -0.49, 0.0)) < 0.0, "bottom");
+        assert!(m.distance(&Vector3::new(0.0, 0.6, 0.0)) > 0.0, "open top");
+    }
+}
