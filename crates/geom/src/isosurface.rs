@@ -21,16 +21,6 @@ pub fn isosurface(f: impl Fn(&Vector3<f64>) -> f64 + Sync, lo: Vector3<f64>, hi:
     let values: Vec<f64> = (0..np * np * np).into_par_iter().map(|g| f(&point(g % np, (g / np) % np, g / (np * np)))).collect();
     let mut mesh = TriMesh::default();
     let mut edge_vertex: HashMap<(usize, usize), u32> = HashMap::new();
-    let mut vertex_on = |a: usize, b: usize, mesh: &mut TriMesh, pa: Vector3<f64>, pb: Vector3<f64>| -> u32 {
-        let key = (a.min(b), a.max(b));
-        *edge_vertex.entry(key).or_insert_with(|| {
-            let (va, vb) = (values[a], values[b]);
-            let t = if va == vb { 0.5 } else { va / (va - vb) };
-            let p = pa + (pb - pa) * t;
-            mesh.vertices.push([p.x as f32, p.y as f32, p.z as f32]);
-            (mesh.vertices.len() - 1) as u32
-        })
-    };
     for k in 0..n {
         for j in 0..n {
             for i in 0..n {
@@ -61,19 +51,28 @@ pub fn isosurface(f: impl Fn(&Vector3<f64>) -> f64 + Sync, lo: Vector3<f64>, hi:
                         }
                         mesh.triangles.push(if nrm.dot(&grad) >= 0.0 { tri } else { [tri[0], tri[2], tri[1]] });
                     };
-                    let ev = |a: usize, b: usize, mesh: &mut TriMesh, vo: &mut dyn FnMut(usize, usize, &mut TriMesh, Vector3<f64>, Vector3<f64>) -> u32| vo(g[a], g[b], mesh, p[a], p[b]);
+                    // The vertex on tetrahedron edge (a, b), shared with every cell that has it.
+                    let mut ev = |a: usize, b: usize, mesh: &mut TriMesh| -> u32 {
+                        *edge_vertex.entry((g[a].min(g[b]), g[a].max(g[b]))).or_insert_with(|| {
+                            let (va, vb) = (values[g[a]], values[g[b]]);
+                            let t = if va == vb { 0.5 } else { va / (va - vb) };
+                            let q = p[a] + (p[b] - p[a]) * t;
+                            mesh.vertices.push([q.x as f32, q.y as f32, q.z as f32]);
+                            (mesh.vertices.len() - 1) as u32
+                        })
+                    };
                     match inside.len() {
                         1 | 3 => {
                             let (lone, others) = if inside.len() == 1 { (inside[0], outside.clone()) } else { (outside[0], inside.clone()) };
-                            let t = [0, 1, 2].map(|q| ev(lone, others[q], &mut mesh, &mut vertex_on));
+                            let t = [0, 1, 2].map(|q| ev(lone, others[q], &mut mesh));
                             emit(&mut mesh, t);
                         }
                         _ => {
                             let (a, b, c, d) = (inside[0], inside[1], outside[0], outside[1]);
-                            let v0 = ev(a, c, &mut mesh, &mut vertex_on);
-                            let v1 = ev(a, d, &mut mesh, &mut vertex_on);
-                            let v2 = ev(b, d, &mut mesh, &mut vertex_on);
-                            let v3 = ev(b, c, &mut mesh, &mut vertex_on);
+                            let v0 = ev(a, c, &mut mesh);
+                            let v1 = ev(a, d, &mut mesh);
+                            let v2 = ev(b, d, &mut mesh);
+                            let v3 = ev(b, c, &mut mesh);
                             emit(&mut mesh, [v0, v1, v2]);
                             emit(&mut mesh, [v0, v2, v3]);
                         }

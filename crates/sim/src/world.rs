@@ -51,6 +51,16 @@ pub struct ObjectRadiometry {
     pub emitted: f64,
 }
 
+/// A horizontal table top in the world frame.
+#[derive(Clone, Copy, Debug)]
+struct TableTop {
+    height_m: f64,
+    centre_m: [f64; 2],
+    half_size_m: [f64; 2],
+    emissivity: f64,
+    emitted: f64,
+}
+
 /// The traced world (depth frame, metres).
 pub struct World {
     /// Depth camera → world.
@@ -65,8 +75,7 @@ pub struct World {
     body_bvh: Bvh<f64>,
     /// Per body triangle: exposed skin?
     body_skin: Vec<bool>,
-    /// Table: world height, centre, half size; radiometry.
-    table: Option<(f64, [f64; 2], [f64; 2], f64, f64)>,
+    table: Option<TableTop>,
     heat: Vec<(Vector3<f64>, f64, f64)>,
     /// Room radiance.
     pub ambient: f64,
@@ -161,7 +170,13 @@ impl World {
             None => (TriMesh::default(), vec![], Bvh::build(&[], &[]), vec![]),
         };
         let p = &scene.person;
-        let table = scene.table.as_ref().map(|t| (t.height_m, t.centre_m, [t.size_m[0] / 2.0, t.size_m[1] / 2.0], t.emissivity, band_radiance(t.temp_c + ZERO_C_K)));
+        let table = scene.table.as_ref().map(|t| TableTop {
+            height_m: t.height_m,
+            centre_m: t.centre_m,
+            half_size_m: [t.size_m[0] / 2.0, t.size_m[1] / 2.0],
+            emissivity: t.emissivity,
+            emitted: band_radiance(t.temp_c + ZERO_C_K),
+        });
         Ok(Self {
             world_from_depth,
             objects,
@@ -201,7 +216,7 @@ impl World {
             }
             consider(Hit { t_m: t, surface: Surface::Person { skin: self.body_skin[tri as usize] }, point: ray.at(t), normal: n });
         }
-        if let Some((h, c, half, ..)) = self.table {
+        if let Some(TableTop { height_m: h, centre_m: c, half_size_m: half, .. }) = self.table {
             let o = self.world_from_depth.transform_point(&ray.origin);
             let d = self.world_from_depth.transform_vector(&ray.dir);
             if d.z.abs() > 1e-12 {
@@ -244,8 +259,8 @@ impl World {
             }
             Surface::Person { skin } => grey(if skin { self.skin } else { self.clothing }),
             Surface::Table => {
-                let (.., e, l) = self.table.expect("hit implies a table");
-                grey((e, l))
+                let t = self.table.expect("hit implies a table");
+                grey((t.emissivity, t.emitted))
             }
             Surface::Heat(k) => self.heat[k].2,
         }
