@@ -222,23 +222,25 @@ pub fn tabletop(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Ph
     let dist = rng.random_range(0.5..1.5);
     let angle: f64 = rng.random_range(-0.6..0.6);
     let position = [dist * angle.sin(), 0.45 + dist * angle.cos()];
-    let person = Person {
-        phenotype,
-        rotvec_rad: pose.1,
-        pose_name: pose.0,
-        position_m: position,
-        // Facing the table (towards −Y), give or take.
-        yaw_rad: rng.random_range(-0.4..0.4),
-        skin_c: 34.0,
-        clothing_c: 30.0,
-    };
+    // Facing the table (towards −Y), give or take.
+    let person = Person { phenotype, rotvec_rad: pose.1, pose_name: pose.0, position_m: position, yaw_rad: rng.random_range(-0.4..0.4), skin_c: 34.0, clothing_c: 30.0 };
     let third = look_at(Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4), Vector3::new(position[0], position[1], 0.9));
+    assemble(22.0, &world_from_depth, &third, thermal, Some(table), objects, person)
+}
+
+/// A scene with the presets' cameras: a 320×240, 70° depth camera, the thermal camera 4 cm to
+/// its right, and a 320×240, 60° evaluation camera.
+fn assemble(ambient_c: f64, world_from_depth: &Rigid3<f64>, world_from_third: &Rigid3<f64>, thermal: ThermalPreset, table: Option<Table>, objects: Vec<SceneObject>, person: Person) -> SceneFile {
+    let camera = |fov_deg: f64, pose: &Rigid3<f64>| PlacedCamera {
+        intrinsics: PinholeCamera::from_fov(320, 240, fov_deg.to_radians()).expect("valid"),
+        world_from_camera: RigidFile::from_rigid(pose),
+    };
     SceneFile {
-        ambient_c: 22.0,
-        depth_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 70f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&world_from_depth) },
+        ambient_c,
+        depth_camera: camera(70.0, world_from_depth),
         thermal_camera: ThermalCamera { intrinsics: thermal.camera(), depth_from_thermal: small_baseline() },
-        third_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 60f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&third) },
-        table: Some(table),
+        third_camera: camera(60.0, world_from_third),
+        table,
         objects,
         person,
         heat_sources: vec![],
@@ -266,27 +268,9 @@ pub fn car(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenoty
     let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     let lateral: f64 = side * rng.random_range(0.5..(0.4 * (dist + 0.6f64)).max(0.6));
     let position = [eye.x + lateral, -0.95 - dist];
-    let person = Person {
-        phenotype,
-        rotvec_rad: pose.1,
-        pose_name: pose.0,
-        position_m: position,
-        yaw_rad: rng.random_range(-3.1..3.1),
-        skin_c: 34.0,
-        clothing_c: 28.0,
-    };
+    let person = Person { phenotype, rotvec_rad: pose.1, pose_name: pose.0, position_m: position, yaw_rad: rng.random_range(-3.1..3.1), skin_c: 34.0, clothing_c: 28.0 };
     let third = look_at(Vector3::new(position[0] + side * 3.0, position[1] - 2.0, 1.6), Vector3::new(position[0], position[1], 0.9));
-    SceneFile {
-        ambient_c: 18.0,
-        depth_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 70f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&world_from_depth) },
-        thermal_camera: ThermalCamera { intrinsics: thermal.camera(), depth_from_thermal: small_baseline() },
-        third_camera: PlacedCamera { intrinsics: PinholeCamera::from_fov(320, 240, 60f64.to_radians()).expect("valid"), world_from_camera: RigidFile::from_rigid(&third) },
-        table: None,
-        objects: vec![car],
-        person,
-        heat_sources: vec![],
-        sensor: Sensor::default(),
-    }
+    assemble(18.0, &world_from_depth, &third, thermal, None, vec![car], person)
 }
 
 /// A rotation about world Z.
