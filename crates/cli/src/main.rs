@@ -30,9 +30,10 @@ struct Cli {
 enum Command {
     /// Run the built-in default end to end and write meshes, images and a report.
     ///
-    /// Until the reflection pipeline lands this covers the body model: it draws a person
-    /// (phenotype and pose) from the seed, poses the open body model, and writes the meshes
-    /// (PLY, OBJ, glTF), keypoints, previews, an HTML report and the run record.
+    /// Simulates the default tabletop scene (bowls and mugs, a person outside the cameras'
+    /// view), reads the capture back through the validating loader, and writes the capture, the
+    /// person's mesh (PLY, OBJ, glTF), previews, an HTML report and the run record.
+    /// Reconstruction joins when it is built; until then the meshes are the ground truth.
     Demo {
         /// Output directory (replaced atomically when the run completes).
         #[arg(long, default_value = "irmirror-demo")]

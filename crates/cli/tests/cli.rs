@@ -32,16 +32,6 @@ fn help_explains_every_command() {
     }
 }
 
-fn read_all(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
-        .collect();
-    files.sort();
-    files
-}
-
 #[test]
 fn demo_is_deterministic_and_complete() {
     let (a, b, c) = (tmp("demo-a"), tmp("demo-b"), tmp("demo-c"));
@@ -49,15 +39,17 @@ fn demo_is_deterministic_and_complete() {
         let o = irmirror(&["demo", "--out", dir.to_str().unwrap(), "--seed", seed]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
-    let (fa, fb, fc) = (read_all(&a), read_all(&b), read_all(&c));
+    let (fa, fb, fc) = (read_tree(&a), read_tree(&b), read_tree(&c));
     let names: Vec<&str> = fa.iter().map(|f| f.0.as_str()).collect();
-    assert_eq!(names, ["body.glb", "body.obj", "body.ply", "params.json", "preview.png", "report.html", "run.toml"]);
+    for f in ["person_truth.glb", "person_truth.obj", "person_truth.ply", "person_preview.png", "report.html", "run.toml", "capture/capture.toml", "capture/thermal.png"] {
+        assert!(names.contains(&f), "missing {f} in {names:?}");
+    }
     assert_eq!(fa, fb, "same seed, different output");
     assert_ne!(fa, fc, "different seeds gave identical output");
     // Re-running into an existing result replaces it and leaves no partial directory behind.
     let o = irmirror(&["demo", "--out", a.to_str().unwrap(), "--seed", "6"]);
     assert!(o.status.success());
-    assert_eq!(read_all(&a), fc);
+    assert_eq!(read_tree(&a), fc);
     let parent = a.parent().unwrap();
     let leftovers = std::fs::read_dir(parent).unwrap().filter(|e| {
         let n = e.as_ref().unwrap().file_name().to_string_lossy().into_owned();
