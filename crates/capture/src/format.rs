@@ -71,6 +71,18 @@ pub enum ThermalUnits {
         /// Counts at zero radiance.
         offset: f64,
     },
+    /// Raw counts with a FLIR-style Planck calibration: `T = b / ln(r / (counts − o) + f)` (K);
+    /// 16-bit PNG or TIFF.
+    CountsPlanck {
+        /// Planck R (counts · …), > 0.
+        r: f64,
+        /// Planck B, K, > 0.
+        b: f64,
+        /// Planck F (typically 1).
+        f: f64,
+        /// Offset O, counts.
+        o: f64,
+    },
     /// Counts = 100 × kelvin (FLIR Lepton TLinear); 16-bit PNG or TIFF.
     Centikelvin,
     /// Kelvin, float `.npy` or 32-bit float TIFF.

@@ -66,6 +66,11 @@ impl Capture {
         {
             return Err(field("thermal.units", format!("gain {gain} must be positive and offset {offset} finite")));
         }
+        if let ThermalUnits::CountsPlanck { r, b, f, o } = file.thermal.units
+            && !(r > 0.0 && b > 0.0 && f.is_finite() && o.is_finite())
+        {
+            return Err(field("thermal.units", format!("Planck constants need r > 0 and b > 0 (r = {r}, b = {b}, f = {f}, o = {o})")));
+        }
         if file.objects.is_empty() {
             return Err(field("object", "the capture lists no objects (add [[object]] tables with a category)".into()));
         }
@@ -96,6 +101,8 @@ impl Capture {
         let to_kelvin = |path: &Path| -> Result<Image<f64>, CaptureError> {
             let img = match file.thermal.units {
                 ThermalUnits::CountsLinear { gain, offset } => read_gray16_png(path)?.map(|c| temperature_of((f64::from(c) - offset) / gain)),
+                // Counts at or below the offset give NaN, reported below as non-finite.
+                ThermalUnits::CountsPlanck { r, b, f, o } => read_gray16_png(path)?.map(|c| b / (r / (f64::from(c) - o) + f).ln()),
                 ThermalUnits::Centikelvin => read_gray16_png(path)?.map(|c| f64::from(c) / 100.0),
                 ThermalUnits::Kelvin => read_float(path)?,
                 ThermalUnits::Celsius => read_float(path)?.map(|c| c + ZERO_C_K),

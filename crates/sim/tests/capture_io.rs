@@ -53,6 +53,26 @@ fn loader_round_trips_the_simulator() {
         }
     }
     assert_eq!(cap.objects[0].mask.as_ref().unwrap().data, sim.masks[0].data);
+
+    // The same frame as centikelvin in a 16-bit TIFF, and as raw counts with Planck constants.
+    let ck: Vec<u16> = cap.thermal_k.data.iter().map(|k| (k * 100.0).round() as u16).collect();
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(160, 120, ck).unwrap();
+    img.save(dir.join("thermal_ck.tiff")).unwrap();
+    let (r, b, f, o) = (300_000.0, 1400.0, 1.0, 100.0);
+    let raw: Vec<u16> = cap.thermal_k.data.iter().map(|t| (r / ((b / t).exp() - f) + o).round() as u16).collect();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(160, 120, raw).unwrap().save(dir.join("thermal_raw.png")).unwrap();
+    for (file, units) in [("thermal_ck.tiff", "kind = \"centikelvin\""), ("thermal_raw.png", "kind = \"counts-planck\"\nr = 300000.0\nb = 1400.0\nf = 1.0\no = 100.0")] {
+        let t = std::fs::read_to_string(dir.join("capture.toml")).unwrap();
+        let head = t.split("[thermal.units]").next().unwrap().replace("file = \"thermal.png\"", &format!("file = \"{file}\"")).replace("background = [\"thermal_background.png\"]", "");
+        let rest = t.split("[thermal.units]").nth(1).unwrap();
+        let after = &rest[rest.find("\n[").unwrap()..];
+        std::fs::write(dir.join("capture.toml"), format!("{head}[thermal.units]\n{units}\n{after}")).unwrap();
+        let c2 = Capture::load(&dir).unwrap();
+        for (a, b) in c2.thermal_k.data.iter().zip(&cap.thermal_k.data) {
+            assert!((a - b).abs() < 0.02, "{file}: {a} vs {b}");
+        }
+        std::fs::write(dir.join("capture.toml"), t).unwrap();
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 
