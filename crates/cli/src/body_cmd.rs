@@ -7,7 +7,6 @@ use clap::Subcommand;
 use irmirror_body::check::{CaseOutcome, check_vectors};
 use irmirror_body::import::{ImportOptions, import_wheel};
 use irmirror_body::{BodyAsset, BodyModel, Phenotype, Pose};
-use irmirror_geom::nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
 /// Subcommands of `irmirror body`.
@@ -132,7 +131,7 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
         }
         BodyCommand::Sample { out, seed, count, asset } => {
             let model = load_model(asset.as_deref())?;
-            let stage = Staging::new(&out)?;
+            let stage = Staging::new(&out, "run.toml")?;
             let mut rng = irmirror_geom::rng::seeded(seed, 0);
             let mut bodies = vec![
                 ("a-pose".to_string(), Phenotype::default(), poses::named(&model, "a-pose")),
@@ -148,7 +147,7 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             for (i, (name, ph, rotvecs)) in bodies.iter().enumerate() {
                 let shaped = model.shaped_phenotype::<f32>(ph)?;
                 let r32: Vec<[f32; 3]> = rotvecs.iter().map(|w| w.map(|x| x as f32)).collect();
-                let pose = Pose::from_axis_angles(&r32, shaped.joint_heads[0] + Vector3::new(0.0, 0.0, 0.0));
+                let pose = Pose::from_axis_angles(&r32, shaped.joint_heads[0]);
                 let posed = model.pose(&shaped, &pose)?;
                 let mesh = model.mesh(&posed);
                 let file = format!("body_{i:02}_{name}.ply");

@@ -32,7 +32,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     bar.set_style(indicatif::ProgressStyle::with_template("{msg:28} {bar:30} {pos}/{len}").expect("valid template"));
     bar.set_message("loading the body model");
     let model = BodyModel::builtin()?;
-    let stage = Staging::new(out)?;
+    let stage = Staging::new(out, "run.toml")?;
     bar.inc(1);
 
     bar.set_message("simulating a tabletop capture");

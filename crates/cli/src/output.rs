@@ -16,9 +16,22 @@ pub struct Staging {
 }
 
 impl Staging {
-    /// Starts writing `target`.
-    pub fn new(target: &Path) -> Result<Self> {
+    /// Starts writing `target`. An existing `target` is replaced only if it is an earlier result
+    /// (it holds `marker`, e.g. `run.toml`) or empty: never a user's file or other directory.
+    pub fn new(target: &Path, marker: &str) -> Result<Self> {
         let name = target.file_name().with_context(|| format!("{} has no directory name", target.display()))?;
+        if target.exists() {
+            if !target.is_dir() {
+                anyhow::bail!("{} exists and is not a directory; choose another --out", target.display());
+            }
+            let empty = std::fs::read_dir(target).map(|mut d| d.next().is_none()).unwrap_or(false);
+            if !empty && !target.join(marker).exists() {
+                anyhow::bail!(
+                    "{} exists and is not an irmirror result (no {marker} in it); choose another --out or remove it",
+                    target.display()
+                );
+            }
+        }
         let parent = match target.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),

@@ -65,7 +65,7 @@ fn draw_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u64, at
 
 /// Simulates into `out` (atomically) and returns the figures.
 pub fn run(model: &BodyModel, scene: &SceneFile, out: &Path, seed: u64) -> Result<(SimReport, PathBuf)> {
-    let stage = Staging::new(out)?;
+    let stage = Staging::new(out, "capture.toml")?;
     let sim = simulate(model, scene, seed)?;
     sim.write(model, &stage.path(""), seed)?;
     let dir = stage.commit()?;

@@ -156,4 +156,14 @@ fn simulate_writes_a_loadable_deterministic_capture() {
     let o = irmirror(&["simulate", "--scene", bad.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("bad-scene.toml"), "{}", stderr(&o));
     assert!(!out.exists());
+    // --out never replaces a file or a directory that is not an irmirror result.
+    let precious = tmp("precious");
+    std::fs::create_dir_all(&precious).unwrap();
+    std::fs::write(precious.join("thesis.tex"), "do not delete").unwrap();
+    let o = irmirror(&["demo", "--out", precious.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("not an irmirror result"), "{}", stderr(&o));
+    assert!(precious.join("thesis.tex").exists());
+    let o = irmirror(&["simulate", "--out", precious.join("thesis.tex").to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("not a directory"));
+    std::fs::remove_dir_all(&precious).ok();
 }

@@ -101,6 +101,9 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
     for (name, cam) in [("depth_camera", &scene.depth_camera.intrinsics), ("thermal_camera", &scene.thermal_camera.intrinsics), ("third_camera", &scene.third_camera.intrinsics)] {
         cam.validate().map_err(|e| SimError::Scene(format!("{name}: {e}")))?;
     }
+    if scene.objects.is_empty() {
+        return Err(SimError::Scene("objects: a capture needs at least one reflecting object".into()));
+    }
     if scene.sensor.supersample == 0 || !(1..=16).contains(&scene.sensor.bits) {
         return Err(SimError::Scene("sensor: supersample must be ≥ 1 and bits in 1..=16".into()));
     }
