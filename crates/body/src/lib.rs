@@ -24,6 +24,7 @@ pub mod keypoints;
 pub mod lbs;
 pub mod model;
 pub mod phenotype;
+pub mod prior;
 pub mod shape;
 
 pub use asset::BodyAsset;

@@ -134,12 +134,12 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             let stage = Staging::new(&out, "run.toml")?;
             let mut rng = irmirror_geom::rng::seeded(seed, 0);
             let mut bodies = vec![
-                ("a-pose".to_string(), Phenotype::default(), poses::named(&model, "a-pose")),
-                ("t-pose".to_string(), Phenotype::default(), poses::named(&model, "t-pose")),
+                ("a-pose".to_string(), Phenotype::default(), poses::named(&model, "a-pose", &mut rng)),
+                ("t-pose".to_string(), Phenotype::default(), poses::named(&model, "t-pose", &mut rng)),
             ];
             for _ in 0..count {
                 let ph = poses::random_phenotype(&mut rng);
-                let (name, r) = poses::random_pose(&model, &mut rng, 0.08);
+                let (name, r) = poses::random_pose(&model, &mut rng);
                 bodies.push((name, ph, r));
             }
             let mut meshes = Vec::new();

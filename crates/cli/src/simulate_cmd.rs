@@ -51,8 +51,7 @@ pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u
 fn draw_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u64, attempt: u64) -> SceneFile {
     let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
     let phenotype = poses::random_phenotype(&mut rng);
-    let (name, mut rotvecs) = poses::random_pose(model, &mut rng, 0.08);
-    rotvecs[0] = [0.0; 3]; // the scene's yaw turns the person
+    let (name, rotvecs) = poses::random_pose(model, &mut rng);
     let t = match thermal {
         Thermal::Lepton => ThermalPreset::Lepton,
         Thermal::Boson => ThermalPreset::Boson,

@@ -1,0 +1,111 @@
+//! The pose prior (paper: VPoser): a VAE over the 35 body-joint rotations, trained by
+//! `irmirror train-pose-prior` on a procedural, anatomically limited pose set, shipped as
+//! `assets/pose_prior/pose_vae.safetensors`.
+//!
+//! | parameter | unit | differentiable |
+//! |---|---|---|
+//! | latent `z` (32) | — (prior N(0, I)) | yes: [`PosePrior::decode_vjp`] |
+//! | decoded joint rotations 1…35 | rotation matrices, world-aligned rest axes | — |
+//!
+//! Gradients of an image loss reach `z` through candle's autodiff with the surrogate
+//! `Σ R ⊙ stop_grad(∂L/∂R)`; the prior term is `‖z‖²`.
+
+pub mod generator;
+pub mod limits;
+pub mod penetration;
+pub mod train;
+pub mod vae;
+
+use candle_core::{DType, Tensor};
+use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd};
+use nalgebra::{Matrix3, Vector3};
+pub use vae::{JOINTS, LATENT, PoseVae, PriorError};
+
+/// The shipped weights (see `assets/pose_prior/README.md`).
+pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../../../assets/pose_prior/pose_vae.safetensors");
+
+/// The prior, ready to decode.
+pub struct PosePrior {
+    vae: PoseVae,
+}
+
+impl PosePrior {
+    /// Wraps a network.
+    pub fn new(vae: PoseVae) -> Self {
+        Self { vae }
+    }
+
+    /// The shipped prior in `dtype` (F32 for use, F64 for gradient tests).
+    pub fn builtin(dtype: DType) -> Result<Self, PriorError> {
+        let tensors = candle_core::safetensors::load_buffer(BUILTIN_WEIGHTS, &candle_core::Device::Cpu)?;
+        Ok(Self { vae: PoseVae::from_tensors(tensors, dtype)? })
+    }
+
+    /// The network.
+    pub fn vae(&self) -> &PoseVae {
+        &self.vae
+    }
+
+    fn latent(&self, z: &[f64]) -> Result<Tensor, PriorError> {
+        if z.len() != LATENT || z.iter().any(|x| !x.is_finite()) {
+            return Err(candle_core::Error::Msg(format!("the latent must hold {LATENT} finite values, got {}", z.len())).into());
+        }
+        Ok(Tensor::from_vec(z.to_vec(), (1, LATENT), self.vae.device())?.to_dtype(self.vae.dtype())?)
+    }
+
+    /// Decodes one latent to 36 rotations (index 0, the root, is the identity).
+    pub fn decode(&self, z: &[f64]) -> Result<Vec<Matrix3<f64>>, PriorError> {
+        let r = self.vae.decode(&self.latent(z)?)?.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+        let mut out = vec![Matrix3::identity()];
+        out.extend(r.chunks_exact(9).map(|m| Matrix3::from_row_slice(m)));
+        Ok(out)
+    }
+
+    /// Decodes one latent to 36 rotation vectors (root zero).
+    pub fn decode_axis_angles(&self, z: &[f64]) -> Result<Vec<[f64; 3]>, PriorError> {
+        Ok(self.decode(z)?.iter().map(|m| matrix_to_axis_angle(m).into()).collect())
+    }
+
+    /// `∂L/∂z` from `∂L/∂R` of the 36 (or 35 body) rotations of [`Self::decode`].
+    pub fn decode_vjp(&self, z: &[f64], d_rotations: &[Matrix3<f64>]) -> Result<Vec<f64>, PriorError> {
+        let body = match d_rotations.len() {
+            36 => &d_rotations[1..],
+            35 => d_rotations,
+            n => return Err(candle_core::Error::Msg(format!("{n} rotation gradients, expected 35 or 36")).into()),
+        };
+        let zv = candle_core::Var::from_tensor(&self.latent(z)?)?;
+        let r = self.vae.decode(zv.as_tensor())?;
+        let g: Vec<f64> = body.iter().flat_map(|m| (0..9).map(move |k| m[(k / 3, k % 3)])).collect();
+        let g = Tensor::from_vec(g, (1, JOINTS, 3, 3), self.vae.device())?.to_dtype(r.dtype())?;
+        let surrogate = (&r * &g)?.sum_all()?;
+        let grads = surrogate.backward()?;
+        let dz = grads.get(zv.as_tensor()).ok_or_else(|| candle_core::Error::Msg("no gradient for the latent".into()))?;
+        Ok(dz.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
+    }
+
+    /// The encoder mean for a pose given as 36 rotation vectors (root ignored).
+    pub fn encode(&self, rotvecs: &[[f64; 3]]) -> Result<Vec<f64>, PriorError> {
+        let x = features(std::slice::from_ref(&rotvecs.to_vec()));
+        let t = Tensor::from_vec(x, (1, 6 * JOINTS), self.vae.device())?.to_dtype(self.vae.dtype())?;
+        let (mu, _) = self.vae.encode(&t)?;
+        Ok(mu.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
+    }
+}
+
+/// The prior loss `‖z‖²` and its gradient `2z`.
+pub fn latent_prior(z: &[f64]) -> (f64, Vec<f64>) {
+    (z.iter().map(|x| x * x).sum(), z.iter().map(|x| 2.0 * x).collect())
+}
+
+/// 6-D features (joints 1…35, row-major) of poses given as rotation vectors.
+pub fn features(poses: &[Vec<[f64; 3]>]) -> Vec<f64> {
+    poses
+        .iter()
+        .flat_map(|p| p[1..].iter().flat_map(|w| matrix_to_sixd(&axis_angle_to_matrix(&Vector3::from(*w))).iter().copied().collect::<Vec<_>>()))
+        .collect()
+}
+
+/// Geodesic angle between two rotations, radians.
+pub fn rotation_angle(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
+    (((a.transpose() * b).trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+}

@@ -1,0 +1,161 @@
+//! Training the pose VAE (`irmirror train-pose-prior`): Adam on `‖R̂ − R‖²_F + β KL`, β annealed
+//! from 0 over the first half, batches drawn from a fixed procedural pose set; deterministic for
+//! a seed (weights, data, noise and batches all come from the seeded generator).
+
+use super::generator::PoseGenerator;
+use super::penetration::PenetrationTest;
+use super::{PosePrior, PoseVae, PriorError, features, rotation_angle};
+use crate::BodyModel;
+use candle_core::{DType, Tensor};
+use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use irmirror_geom::rotation::axis_angle_to_matrix;
+use nalgebra::Vector3;
+use rand::Rng;
+use serde::Serialize;
+
+/// Training settings.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainConfig {
+    /// Poses in the training set.
+    pub poses: usize,
+    /// Held-out poses for the figures.
+    pub held_out: usize,
+    /// Optimiser steps.
+    pub steps: usize,
+    /// Batch size.
+    pub batch: usize,
+    /// Adam learning rate.
+    pub lr: f64,
+    /// Final KL weight.
+    pub kl_weight: f64,
+    /// Seed.
+    pub seed: u64,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self { poses: 100_000, held_out: 2_000, steps: 6_000, batch: 256, lr: 1e-3, kl_weight: 5e-3, seed: 0 }
+    }
+}
+
+/// Figures of a trained prior.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainReport {
+    /// The settings.
+    pub config: TrainConfig,
+    /// Training time, s.
+    pub train_s: f64,
+    /// Final reconstruction loss (batch mean of Σ‖R̂ − R‖²).
+    pub final_reconstruction: f64,
+    /// Final KL (batch mean).
+    pub final_kl: f64,
+    /// Held-out encode → decode error: mean geodesic joint-angle error, degrees.
+    pub held_out_joint_error_deg: f64,
+    /// Fraction of decoded N(0, I) samples with any joint more than 5° outside its limits.
+    pub samples_outside_limits_5deg: f64,
+    /// Fraction of decoded samples with any joint outside its limits at all.
+    pub samples_outside_limits: f64,
+    /// Fraction of (sample, joint) pairs more than 5° outside the joint's limits.
+    pub joints_outside_limits_5deg: f64,
+    /// Fraction of the training poses whose limb capsules overlap.
+    pub training_self_penetration: f64,
+    /// Fraction of decoded samples whose limb capsules overlap.
+    pub samples_self_penetration: f64,
+}
+
+fn matrices(poses: &[Vec<[f64; 3]>]) -> Vec<f64> {
+    poses
+        .iter()
+        .flat_map(|p| p[1..].iter().flat_map(|w| {
+            let m = axis_angle_to_matrix(&Vector3::from(*w));
+            (0..9).map(move |k| m[(k / 3, k % 3)])
+        }))
+        .collect()
+}
+
+/// Trains a prior; `progress(step, loss)` is called every 50 steps.
+pub fn train(model: &BodyModel, cfg: &TrainConfig, mut progress: impl FnMut(usize, f64)) -> Result<(PoseVae, TrainReport), PriorError> {
+    let poses_gen = PoseGenerator::new(model);
+    let mut data_rng = irmirror_geom::rng::seeded(cfg.seed, 1);
+    let poses: Vec<Vec<[f64; 3]>> = (0..cfg.poses).map(|_| poses_gen.sample(&mut data_rng).1).collect();
+    let mut hold_rng = irmirror_geom::rng::seeded(cfg.seed, 2);
+    let held: Vec<Vec<[f64; 3]>> = (0..cfg.held_out).map(|_| poses_gen.sample(&mut hold_rng).1).collect();
+    let dev = candle_core::Device::Cpu;
+    let x_all = Tensor::from_vec(features(&poses), (cfg.poses, 6 * super::JOINTS), &dev)?.to_dtype(DType::F32)?;
+    let r_all = Tensor::from_vec(matrices(&poses), (cfg.poses, super::JOINTS, 3, 3), &dev)?.to_dtype(DType::F32)?;
+
+    let mut rng = irmirror_geom::rng::seeded(cfg.seed, 3);
+    let vae = PoseVae::new(&mut rng)?;
+    let mut opt = AdamW::new(vae.vars(), ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
+    let t0 = std::time::Instant::now();
+    let (mut last_rec, mut last_kl) = (0.0, 0.0);
+    for step in 0..cfg.steps {
+        let idx: Vec<u32> = (0..cfg.batch).map(|_| rng.random_range(0..cfg.poses as u32)).collect();
+        let idx = Tensor::from_vec(idx, cfg.batch, &dev)?;
+        let x = x_all.index_select(&idx, 0)?;
+        let r = r_all.index_select(&idx, 0)?;
+        let (mu, logvar) = vae.encode(&x)?;
+        let eps = vae.normal(&mut rng, cfg.batch)?;
+        let z = (&mu + (logvar.affine(0.5, 0.0)?.exp()? * eps)?)?;
+        let rec = (vae.decode(&z)? - &r)?.sqr()?.sum_all()?.affine(1.0 / cfg.batch as f64, 0.0)?;
+        let kl = ((mu.sqr()? + logvar.exp()?)? - logvar)?.affine(1.0, -1.0)?.sum_all()?.affine(0.5 / cfg.batch as f64, 0.0)?;
+        let beta = cfg.kl_weight * (2.0 * step as f64 / cfg.steps as f64).min(1.0);
+        let loss = (&rec + kl.affine(beta, 0.0)?)?;
+        opt.backward_step(&loss)?;
+        if step % 50 == 0 || step + 1 == cfg.steps {
+            last_rec = f64::from(rec.to_scalar::<f32>()?);
+            last_kl = f64::from(kl.to_scalar::<f32>()?);
+            progress(step, last_rec + beta * last_kl);
+        }
+    }
+    let train_s = t0.elapsed().as_secs_f64();
+
+    // Figures.
+    let prior = PosePrior::new(PoseVae::from_tensors(vae.vars_map()?, DType::F32)?);
+    let mut err_sum = 0.0;
+    for p in &held {
+        let z = prior.encode(p)?;
+        let dec = prior.decode(&z)?;
+        err_sum += p[1..].iter().zip(&dec[1..]).map(|(w, m)| rotation_angle(&axis_angle_to_matrix(&Vector3::from(*w)), m)).sum::<f64>() / super::JOINTS as f64;
+    }
+    let pen = PenetrationTest::new(model);
+    let n_samples = 2000;
+    let mut sample_rng = irmirror_geom::rng::seeded(cfg.seed, 4);
+    let (mut out5, mut out0, mut pen_s, mut joints5) = (0, 0, 0, 0);
+    for _ in 0..n_samples {
+        let z: Vec<f64> = (0..super::LATENT).map(|_| rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut sample_rng)).collect();
+        let r = prior.decode_axis_angles(&z)?;
+        let per_joint = poses_gen.limits.joint_violations(&r);
+        joints5 += per_joint.iter().filter(|v| **v > 5f64.to_radians()).count();
+        let v = per_joint.iter().copied().fold(0.0, f64::max);
+        out5 += usize::from(v > 5f64.to_radians());
+        out0 += usize::from(v > 1e-6);
+        pen_s += usize::from(pen.penetrates(&r));
+    }
+    let pen_train = poses.iter().take(20_000).filter(|p| pen.penetrates(p)).count() as f64 / poses.len().min(20_000) as f64;
+    let report = TrainReport {
+        config: cfg.clone(),
+        train_s,
+        final_reconstruction: last_rec,
+        final_kl: last_kl,
+        held_out_joint_error_deg: (err_sum / held.len() as f64).to_degrees(),
+        samples_outside_limits_5deg: out5 as f64 / n_samples as f64,
+        samples_outside_limits: out0 as f64 / n_samples as f64,
+        joints_outside_limits_5deg: joints5 as f64 / (n_samples * super::JOINTS) as f64,
+        training_self_penetration: pen_train,
+        samples_self_penetration: pen_s as f64 / n_samples as f64,
+    };
+    Ok((vae, report))
+}
+
+impl PoseVae {
+    /// The variables as a name → tensor map.
+    pub fn vars_map(&self) -> Result<std::collections::HashMap<String, Tensor>, candle_core::Error> {
+        let mut keys = Vec::new();
+        for (name, ..) in super::vae::layer_names() {
+            keys.push(format!("{name}.weight"));
+            keys.push(format!("{name}.bias"));
+        }
+        keys.into_iter().map(|k| Ok((k.clone(), self.tensor(&k)?.copy()?))).collect()
+    }
+}
