@@ -69,6 +69,12 @@ fn decoded_poses_are_rotations() {
             assert!((m.determinant() - 1.0).abs() < 1e-5);
         }
     }
+    let zs: Vec<Vec<f64>> = (0..3).map(|k| vec![0.3 * k as f64; LATENT]).collect();
+    let batch = prior.decode_batch(&zs).unwrap();
+    for (z, b) in zs.iter().zip(&batch) {
+        let one = prior.decode(z).unwrap();
+        assert!(one.iter().zip(b).all(|(a, c)| (a - c).abs().max() < 1e-5), "batch and single decodes differ");
+    }
     assert!(prior.decode(&[0.0; 3]).is_err());
     assert!(prior.decode(&[f64::NAN; LATENT]).is_err());
 }
@@ -108,8 +114,8 @@ fn shipped_prior_round_trips_generated_poses() {
         err += p[1..].iter().zip(&back[1..]).map(|(w, m)| rotation_angle(&axis_angle_to_matrix(&Vector3::from(*w)), m)).sum::<f64>() / 35.0;
     }
     let mean_deg = (err / n as f64).to_degrees();
-    // Measured 2026-11-22 (see assets/pose_prior/README.md); the bound leaves a margin.
-    assert!(mean_deg < 6.0, "mean joint-angle error {mean_deg}°");
+    // Held-out error measured at 5.9° (assets/pose_prior/README.md); the bound leaves a margin.
+    assert!(mean_deg < 7.5, "mean joint-angle error {mean_deg}°");
 }
 
 #[test]

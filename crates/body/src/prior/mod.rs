@@ -61,6 +61,20 @@ impl PosePrior {
         Ok(out)
     }
 
+    /// Decodes a batch of latents (one candle call) to 36 rotations each (root = identity): the
+    /// optimiser's parallel initialisations.
+    pub fn decode_batch(&self, zs: &[Vec<f64>]) -> Result<Vec<Vec<Matrix3<f64>>>, PriorError> {
+        if zs.iter().any(|z| z.len() != LATENT || z.iter().any(|x| !x.is_finite())) {
+            return Err(candle_core::Error::Msg(format!("every latent must hold {LATENT} finite values")).into());
+        }
+        let flat: Vec<f64> = zs.iter().flatten().copied().collect();
+        let t = Tensor::from_vec(flat, (zs.len(), LATENT), self.vae.device())?.to_dtype(self.vae.dtype())?;
+        let r = self.vae.decode(&t)?.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+        Ok(r.chunks_exact(9 * JOINTS)
+            .map(|one| std::iter::once(Matrix3::identity()).chain(one.chunks_exact(9).map(Matrix3::from_row_slice)).collect())
+            .collect())
+    }
+
     /// Decodes one latent to 36 rotation vectors (root zero).
     pub fn decode_axis_angles(&self, z: &[f64]) -> Result<Vec<[f64; 3]>, PriorError> {
         Ok(self.decode(z)?.iter().map(|m| matrix_to_axis_angle(m).into()).collect())
