@@ -55,10 +55,7 @@ impl PosePrior {
 
     /// Decodes one latent to 36 rotations (index 0, the root, is the identity).
     pub fn decode(&self, z: &[f64]) -> Result<Vec<Matrix3<f64>>, PriorError> {
-        let r = self.vae.decode(&self.latent(z)?)?.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
-        let mut out = vec![Matrix3::identity()];
-        out.extend(r.chunks_exact(9).map(|m| Matrix3::from_row_slice(m)));
-        Ok(out)
+        Ok(self.decode_batch(&[z.to_vec()])?.remove(0))
     }
 
     /// Decodes a batch of latents (one candle call) to 36 rotations each (root = identity): the
