@@ -7,6 +7,7 @@ mod demo;
 mod output;
 mod poses;
 mod prior_cmd;
+mod reconstruct_cmd;
 mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
@@ -64,6 +65,21 @@ enum Command {
         /// Seed for the scene (with a preset) and the sensor noise.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+    },
+    /// Reconstruct from a capture. Built so far: `--stage preprocess` (the thermal reflection
+    /// mask and its edges, with every intermediate image in debug/).
+    Reconstruct {
+        /// The capture directory (read only).
+        capture: PathBuf,
+        /// Output result directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// How far to run.
+        #[arg(long, value_enum, default_value = "full")]
+        stage: reconstruct_cmd::Stage,
+        /// Stage settings (TOML; see PreprocessConfig).
+        #[arg(long)]
+        config: Option<PathBuf>,
     },
     /// Train the pose prior (a VAE over joint rotations) on the procedural pose set.
     ///
@@ -141,6 +157,7 @@ fn main() -> std::process::ExitCode {
         Command::Body { command } => body_cmd::run(command, progress),
         Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
         Command::Bench { command } => bench::run(command),
+        Command::Reconstruct { capture, out, stage, config } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref()),
         Command::TrainPosePrior { out, seed, steps, poses, batch } => {
             if steps == 0 || poses < 100 || batch == 0 {
                 Err(anyhow::anyhow!("--steps and --batch must be positive and --poses at least 100"))

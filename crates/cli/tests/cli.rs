@@ -167,3 +167,31 @@ fn simulate_writes_a_loadable_deterministic_capture() {
     assert!(!o.status.success() && stderr(&o).contains("not a directory"));
     std::fs::remove_dir_all(&precious).ok();
 }
+
+#[test]
+fn reconstruct_stage_0_writes_the_mask_and_refuses_what_is_not_built() {
+    let cap = tmp("rec-capture");
+    let o = irmirror(&["simulate", "--preset", "car", "--out", cap.to_str().unwrap(), "--seed", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = read_tree(&cap);
+    let out = tmp("rec-out");
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--stage", "preprocess"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["reflection_mask.png", "run.toml", "debug/rise.png", "debug/object_pixels.png", "debug/mask_raw.png", "debug/edges.png"] {
+        assert!(out.join(f).exists(), "missing {f}");
+    }
+    assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
+    // Stages not built yet: a clear error, no output.
+    let out2 = tmp("rec-out2");
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("only `--stage preprocess`"));
+    assert!(!out2.exists());
+    // A capture whose thermal frame equals its background: no reflection, clear error, no output.
+    std::fs::copy(cap.join("thermal_background.png"), cap.join("thermal.png")).unwrap();
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap(), "--stage", "preprocess"]);
+    assert!(!o.status.success() && stderr(&o).contains("no reflection"), "{}", stderr(&o));
+    assert!(!out2.exists());
+    for d in [cap, out] {
+        std::fs::remove_dir_all(d).ok();
+    }
+}
