@@ -4,7 +4,6 @@
 use crate::ReconError;
 use crate::morphology::{close, dilate, edges, open, remove_small_components};
 use irmirror_capture::{Capture, Image};
-use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// How the rise over the background is thresholded.
@@ -138,7 +137,7 @@ pub fn object_pixels(capture: &Capture) -> Image<bool> {
                 continue;
             }
             let p_depth = dc.unproject(f64::from(col) + 0.5, f64::from(row) + 0.5, z);
-            let p_thermal = thermal_from_depth.transform_point(&Vector3::from(p_depth));
+            let p_thermal = thermal_from_depth.transform_point(&p_depth);
             if let Some((u, v)) = tc.project_to_pixel(&p_thermal) {
                 out.data[(v * tc.width + u) as usize] = true;
             }
