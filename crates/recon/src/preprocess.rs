@@ -161,7 +161,7 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
     };
     let rise = Image { width: t.width, height: t.height, data: t.data.iter().zip(&background.data).map(|(a, b)| a - b).collect() };
     let objects = object_pixels(capture);
-    let mut on: Vec<f64> = rise.data.iter().zip(&objects.data).filter(|(_, o)| **o).map(|(r, _)| *r).collect();
+    let on: Vec<f64> = rise.data.iter().zip(&objects.data).filter(|(_, o)| **o).map(|(r, _)| *r).collect();
     if on.is_empty() {
         return Err(ReconError::NoObjectPixels);
     }
@@ -174,7 +174,6 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         Threshold::DeltaK(k) => k,
         Threshold::Otsu { noise_sigmas } => otsu(&on).max(med + noise_sigmas * noise).max(1e-6),
     };
-    on.clear();
     let raw = Image { width: t.width, height: t.height, data: rise.data.iter().zip(&objects.data).map(|(r, o)| *o && *r > threshold_k).collect() };
     let mask = remove_small_components(&close(&open(&raw, cfg.open_px), cfg.close_px), cfg.min_region_px as usize);
     // Closing may reach past the object silhouette: keep the mask on objects.

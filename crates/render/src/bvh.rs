@@ -119,11 +119,6 @@ impl<T: Real> Bvh<T> {
             }
         }
     }
-
-    /// Number of nodes (for tests and statistics).
-    pub fn n_nodes(&self) -> usize {
-        self.nodes.len()
-    }
 }
 
 /// Does the half-line `o + s r`, `s ≥ 0`, meet the box `[lo, hi]`?

@@ -177,14 +177,15 @@ impl<T: Real> SoftRenderer<T> {
 
     /// Visits the pairs of one ray that contribute: `f(triangle, pair distance, x)`.
     #[inline]
-    fn for_each_pair(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, mut f: impl FnMut(u32, &PairDistance<T>, T)) {
+    fn for_each_pair(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, mut f: impl FnMut(u32, &[Vector3<T>; 3], &PairDistance<T>, T)) {
         let inv_sigma = T::of(1.0 / p.sigma_m2);
         match culling {
             Culling::Dense => {
                 for t in 0..self.triangles.len() as u32 {
-                    let pd = ray_triangle_distance(o, r, &self.tri(t));
+                    let tri = self.tri(t);
+                    let pd = ray_triangle_distance(o, r, &tri);
                     let x = if pd.pierced { pd.d2 * inv_sigma } else { -pd.d2 * inv_sigma };
-                    f(t, &pd, x);
+                    f(t, &tri, &pd, x);
                 }
             }
             Culling::Bvh => {
@@ -199,10 +200,11 @@ impl<T: Real> SoftRenderer<T> {
                     if (o + r * s - c).norm_squared() > reach * reach {
                         return;
                     }
-                    let pd = ray_triangle_distance(o, r, &self.tri(t));
+                    let tri = self.tri(t);
+                    let pd = ray_triangle_distance(o, r, &tri);
                     if pd.pierced || pd.d2 <= cull {
                         let x = if pd.pierced { pd.d2 * inv_sigma } else { -pd.d2 * inv_sigma };
-                        f(t, &pd, x);
+                        f(t, &tri, &pd, x);
                     }
                 });
             }
@@ -217,7 +219,7 @@ impl<T: Real> SoftRenderer<T> {
             .map(|i| {
                 let mut log_c = T::zero();
                 let mut n = 0u32;
-                self.for_each_pair(&rays.origin[i], &rays.dir[i], params, culling, |_, _, x| {
+                self.for_each_pair(&rays.origin[i], &rays.dir[i], params, culling, |_, _, _, x| {
                     log_c -= softplus(x);
                     n += 1;
                 });
@@ -274,14 +276,13 @@ impl<T: Real> SoftRenderer<T> {
                     let (o, r) = (&rays.origin[i], &rays.dir[i]);
                     // ∂L/∂x_ij = g (1 − I_i) D_ij; x = λ d²/σ.
                     let scale = g * occ.log_complement[i].exp();
-                    this.for_each_pair(o, r, params, culling, |t, pd, x| {
+                    this.for_each_pair(o, r, params, culling, |t, tri, pd, x| {
                         let dx = scale * sigmoid(x);
                         if dx == T::zero() {
                             return;
                         }
                         let dd2 = if pd.pierced { dx * inv_sigma } else { -dx * inv_sigma };
-                        let tri = this.tri(t);
-                        let pg = pd.grad(o, r, &tri);
+                        let pg = pd.grad(o, r, tri);
                         d_o[k] += pg.origin * dd2;
                         d_r[k] += pg.dir * dd2;
                         for (v, gv) in this.triangles[t as usize].iter().zip(pg.vertices) {

@@ -4,7 +4,7 @@
 
 use crate::sdf::PlacedSdf;
 use crate::sphere_trace::{SurfaceHit, TraceParams, trace};
-use irmirror_geom::{PinholeCamera, Ray, Real, Rigid3};
+use irmirror_geom::{PinholeCamera, Real, Rigid3};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -116,12 +116,6 @@ pub fn reflect_camera(
     out
 }
 
-/// A single camera ray's reflection (for tests and diagnostics).
-pub fn reflect_ray(ray_depth: &Ray<f64>, object: &PlacedSdf, trace_params: &TraceParams) -> Option<Ray<f64>> {
-    let h = trace(object, ray_depth, trace_params)?;
-    Some(Ray::new(h.point, reflect(&ray_depth.dir, &h.normal)))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,7 +136,7 @@ mod tests {
         assert!(rays.len() > 50);
         for i in 0..rays.len() {
             let p = rays.pixel[i];
-            let d: Ray<f64> = cam.pixel_ray(p % 32, p / 32);
+            let d: irmirror_geom::Ray<f64> = cam.pixel_ray(p % 32, p / 32);
             let b = d.dir.dot(&(-c));
             let t = -b - (b * b - (c.norm_squared() - 0.0225)).sqrt();
             let hit = d.at(t);

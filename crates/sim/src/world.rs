@@ -11,7 +11,7 @@ use irmirror_render::hard::first_hit;
 use irmirror_render::sdf::PlacedSdf;
 use irmirror_render::sphere_trace::{SurfaceMethod, TraceParams, trace};
 use irmirror_render::{Bvh, reflect::reflect};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 
 /// What a ray hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -264,10 +264,5 @@ impl World {
             }
             Surface::Heat(k) => self.heat[k].2,
         }
-    }
-
-    /// Object-frame rotation used for placement (exposed for truth files).
-    pub fn object_rotation(&self, k: usize) -> Matrix3<f64> {
-        self.objects[k].depth_from_object.rotation
     }
 }

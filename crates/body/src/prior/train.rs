@@ -147,15 +147,3 @@ pub fn train(model: &BodyModel, cfg: &TrainConfig, mut progress: impl FnMut(usiz
     };
     Ok((vae, report))
 }
-
-impl PoseVae {
-    /// The variables as a name → tensor map.
-    pub fn vars_map(&self) -> Result<std::collections::HashMap<String, Tensor>, candle_core::Error> {
-        let mut keys = Vec::new();
-        for (name, ..) in super::vae::layer_names() {
-            keys.push(format!("{name}.weight"));
-            keys.push(format!("{name}.bias"));
-        }
-        keys.into_iter().map(|k| Ok((k.clone(), self.tensor(&k)?.copy()?))).collect()
-    }
-}

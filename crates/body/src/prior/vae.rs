@@ -48,11 +48,6 @@ const LAYERS: [(&str, usize, usize); 6] = [
     ("dec3", HIDDEN, 6 * JOINTS),
 ];
 
-/// Layer names with fan-in and fan-out.
-pub fn layer_names() -> [(&'static str, usize, usize); 6] {
-    LAYERS
-}
-
 /// The network: one weight and bias variable per layer.
 pub struct PoseVae {
     vars: HashMap<String, Var>,
@@ -113,9 +108,9 @@ impl PoseVae {
         keys.into_iter().map(|k| self.vars[k].clone()).collect()
     }
 
-    /// A variable's current value.
-    pub fn tensor(&self, name: &str) -> Result<Tensor, candle_core::Error> {
-        self.vars.get(name).map(|v| v.as_tensor().clone()).ok_or_else(|| candle_core::Error::Msg(format!("no variable `{name}`")))
+    /// The variables' current values (copies), by name.
+    pub fn vars_map(&self) -> Result<HashMap<String, Tensor>, candle_core::Error> {
+        self.vars.iter().map(|(k, v)| Ok((k.clone(), v.as_tensor().copy()?))).collect()
     }
 
     /// The device (CPU).
