@@ -1,7 +1,6 @@
 //! `irmirror body …`: import, check, sample.
 
 use crate::output::{Staging, preview_sheet, save_png, write_text};
-use crate::poses;
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use irmirror_body::check::{CaseOutcome, check_vectors};
@@ -134,12 +133,12 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             let stage = Staging::new(&out, "run.toml")?;
             let mut rng = irmirror_geom::rng::seeded(seed, 0);
             let mut bodies = vec![
-                ("a-pose".to_string(), Phenotype::default(), poses::named(&model, "a-pose", &mut rng)),
-                ("t-pose".to_string(), Phenotype::default(), poses::named(&model, "t-pose", &mut rng)),
+                ("a-pose".to_string(), Phenotype::default(), irmirror_sim::people::named(&model, "a-pose", &mut rng)),
+                ("t-pose".to_string(), Phenotype::default(), irmirror_sim::people::named(&model, "t-pose", &mut rng)),
             ];
             for _ in 0..count {
-                let ph = poses::random_phenotype(&mut rng);
-                let (name, r) = poses::random_pose(&model, &mut rng);
+                let ph = irmirror_sim::people::random_phenotype(&mut rng);
+                let (name, r) = irmirror_sim::people::random_pose(&model, &mut rng);
                 bodies.push((name, ph, r));
             }
             let mut meshes = Vec::new();

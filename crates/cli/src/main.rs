@@ -5,9 +5,9 @@ mod bench_render;
 mod body_cmd;
 mod demo;
 mod output;
-mod poses;
 mod prior_cmd;
 mod reconstruct_cmd;
+mod result;
 mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
@@ -33,9 +33,9 @@ enum Command {
     /// Run the built-in default end to end and write meshes, images and a report.
     ///
     /// Simulates the default tabletop scene (bowls and mugs, a person outside the cameras'
-    /// view), reads the capture back through the validating loader, and writes the capture, the
-    /// person's mesh (PLY, OBJ, glTF), previews, an HTML report and the run record.
-    /// Reconstruction joins when it is built; until then the meshes are the ground truth.
+    /// view), reconstructs it from the capture alone (stages 0–2), evaluates the result against
+    /// the simulator's truth (root error, normalised 2-D/3-D keypoint distances) and writes the
+    /// capture, the fitted and true meshes, overlays, views, an HTML report and the run record.
     Demo {
         /// Output directory (replaced atomically when the run completes).
         #[arg(long, default_value = "irmirror-demo")]
@@ -66,8 +66,13 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
-    /// Reconstruct from a capture. Built so far: `--stage preprocess` (the thermal reflection
-    /// mask and its edges, with every intermediate image in debug/).
+    /// Reconstruct objects and the person from a capture (the pipeline of DESIGN.md §1).
+    ///
+    /// Stage 0 finds the thermal reflection, stage 1 fits each object's shape prior to the depth
+    /// (support plane, masks or segmentation), stage 2 fits the body to the reflection from
+    /// several initialisations. Writes body and object meshes (PLY/OBJ/glb), params.json,
+    /// overlays, views, loss curves, report.html and run.toml; the directory appears only when
+    /// complete. The capture is only read.
     Reconstruct {
         /// The capture directory (read only).
         capture: PathBuf,
@@ -77,9 +82,15 @@ enum Command {
         /// How far to run.
         #[arg(long, value_enum, default_value = "full")]
         stage: reconstruct_cmd::Stage,
-        /// Stage settings (TOML; see PreprocessConfig).
+        /// Settings (TOML; any subset of the fields of run.toml's `config`).
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Switch off one step (repeatable): the paper's ablations.
+        #[arg(long, value_enum)]
+        ablate: Vec<reconstruct_cmd::AblateArg>,
+        /// Random seed (initialisations, ray draws): the same seed gives the same result.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
     },
     /// Train the pose prior (a VAE over joint rotations) on the procedural pose set.
     ///
@@ -157,7 +168,7 @@ fn main() -> std::process::ExitCode {
         Command::Body { command } => body_cmd::run(command, progress),
         Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
         Command::Bench { command } => bench::run(command),
-        Command::Reconstruct { capture, out, stage, config } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref()),
+        Command::Reconstruct { capture, out, stage, config, ablate, seed } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref(), &ablate, seed, progress),
         Command::TrainPosePrior { out, seed, steps, poses, batch } => {
             if steps == 0 || poses < 100 || batch == 0 {
                 Err(anyhow::anyhow!("--steps and --batch must be positive and --poses at least 100"))

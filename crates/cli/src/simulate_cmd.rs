@@ -1,11 +1,10 @@
 //! `irmirror simulate`: write a synthetic capture with ground truth.
 
 use crate::output::Staging;
-use crate::poses;
 use anyhow::{Context, Result};
 use clap::ValueEnum;
 use irmirror_body::BodyModel;
-use irmirror_sim::scene::{SceneFile, car, tabletop};
+use irmirror_sim::scene::SceneFile;
 use irmirror_sim::{SimReport, ThermalPreset, simulate};
 use std::path::{Path, PathBuf};
 
@@ -27,39 +26,18 @@ pub enum Thermal {
     Boson,
 }
 
-/// Presets redraw their scene (up to this many times) until the person's reflection covers at
-/// least [`MIN_REFLECTION_PIXELS`] thermal pixels: small tabletop reflectors often show none.
-const ATTEMPTS: u64 = 40;
-/// See [`ATTEMPTS`].
-pub const MIN_REFLECTION_PIXELS: usize = 12;
-
-/// The scene for a preset and seed whose reflection is visible: draws scenes from the seed's
-/// successive streams and keeps the first with ≥ 12 reflection pixels (or the last drawn).
+/// The scene for a preset and seed whose reflection is visible (see
+/// [`irmirror_sim::presets::preset_scene`]).
 pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u64) -> Result<SceneFile> {
-    let mut scene = draw_scene(model, preset, thermal, seed, 0);
-    for attempt in 1..ATTEMPTS {
-        let mut probe = scene.clone();
-        probe.sensor = irmirror_sim::Sensor::ideal();
-        if irmirror_sim::simulate::reflection_pixels(model, &probe)? >= MIN_REFLECTION_PIXELS {
-            break;
-        }
-        scene = draw_scene(model, preset, thermal, seed, attempt);
-    }
-    Ok(scene)
-}
-
-fn draw_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u64, attempt: u64) -> SceneFile {
-    let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
-    let phenotype = poses::random_phenotype(&mut rng);
-    let (name, rotvecs) = poses::random_pose(model, &mut rng);
+    let p = match preset {
+        Preset::Tabletop => irmirror_sim::presets::Preset::Tabletop,
+        Preset::Car => irmirror_sim::presets::Preset::Car,
+    };
     let t = match thermal {
         Thermal::Lepton => ThermalPreset::Lepton,
         Thermal::Boson => ThermalPreset::Boson,
     };
-    match preset {
-        Preset::Tabletop => tabletop(&mut rng, (name, rotvecs), phenotype, t),
-        Preset::Car => car(&mut rng, (name, rotvecs), phenotype, t),
-    }
+    Ok(irmirror_sim::presets::preset_scene(model, p, t, seed)?)
 }
 
 /// Simulates into `out` (atomically) and returns the figures.

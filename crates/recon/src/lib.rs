@@ -8,8 +8,14 @@
 //!  at 4 σ of the noise) ─► open/close ─► reflection mask + edge map
 //! ```
 
+pub mod human;
+pub mod metrics;
 pub mod morphology;
+pub mod objects;
+pub mod pipeline;
+pub mod plane;
 pub mod preprocess;
+pub mod segment;
 
 pub use preprocess::{PreprocessConfig, Preprocessed, Threshold, preprocess};
 
@@ -19,6 +25,43 @@ pub enum ReconError {
     /// The capture has no usable object pixels in the thermal view.
     #[error("no object pixel of the capture falls inside the thermal image: check the masks and depth_from_thermal")]
     NoObjectPixels,
+    /// An object category without a prior.
+    #[error("no shape prior for object category {category:?} (known: {known})")]
+    UnknownCategory {
+        /// The category asked for.
+        category: String,
+        /// The known ones.
+        known: String,
+    },
+    /// An object mask covers (almost) no valid depth.
+    #[error("an object mask covers only {pixels} pixels with valid depth (at least 10 are needed)")]
+    EmptyObject {
+        /// Valid pixels found.
+        pixels: usize,
+    },
+    /// No near-horizontal plane under the objects.
+    #[error("no support plane (table or ground) found in the depth image: segmentation needs one to find objects without masks; give masks")]
+    NoSupportPlane,
+    /// Fewer clusters than objects without masks.
+    #[error("segmentation found {found} object clusters above the support plane but the capture lists {wanted} objects without masks; give masks")]
+    Segmentation {
+        /// Objects without masks.
+        wanted: usize,
+        /// Clusters found.
+        found: usize,
+    },
+    /// No pixel of the reflection mask lies on a fitted object.
+    #[error("no pixel of the reflection mask lies on a fitted object, so no reflected ray can see the person; check the object fit (stage 1) and depth_from_thermal")]
+    NoMaskRays,
+    /// Every initialisation of the human fit diverged.
+    #[error("the human fit diverged from all {inits} initialisations (non-finite loss or gradient)")]
+    Diverged {
+        /// Initialisations tried.
+        inits: usize,
+    },
+    /// The body model or pose prior failed.
+    #[error("body model / pose prior: {0}")]
+    Prior(String),
     /// No pixel on an object is warmer than the background by the threshold.
     #[error("no reflection: no object pixel is warmer than its background by {threshold_k:.3} K (largest rise {max_rise_k:.3} K)")]
     NoReflection {

@@ -19,6 +19,7 @@ pub mod npy;
 pub mod occupancy;
 pub mod reflect;
 pub mod sdf;
+pub mod shapes;
 pub mod sphere_trace;
 
 pub use bvh::Bvh;

@@ -10,9 +10,11 @@
 //!  ─► capture.toml, depth.png, thermal.png, thermal_background.png, rgb.png, masks/, truth/
 //! ```
 
+pub mod people;
+pub mod presets;
 pub mod scene;
 pub mod sensor;
-pub mod shapes;
+pub use irmirror_render::shapes;
 pub mod simulate;
 pub mod world;
 

@@ -1,5 +1,5 @@
-//! Seeded random people for the demo, the simulator presets and `body sample`: adult phenotypes
-//! and poses from the procedural pose set's activity templates (`irmirror_body::prior::generator`).
+//! Seeded random people for the presets, the demo and `body sample`: adult phenotypes and poses
+//! from the procedural pose set's activity templates (`irmirror_body::prior::generator`).
 
 use irmirror_body::prior::generator::PoseGenerator;
 use irmirror_body::{BodyModel, Phenotype};

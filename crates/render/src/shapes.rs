@@ -1,8 +1,8 @@
-//! Object shapes for the simulator: analytic SDFs in the normalised object frame (+Y up, unit
-//! sphere), with documented parameters. Procedural families for learned priors come with the
-//! object-prior work; these serve scenes and tests today.
+//! Procedural object families: analytic SDFs in the normalised object frame (+Y up, unit
+//! sphere), with documented parameters. The simulator builds its scenes from them and stage 1
+//! fits them (a low-dimensional shape prior until the learned DeepSDF priors of issue 4 land).
 
-use irmirror_render::sdf::{Bowl, Sdf};
+use crate::sdf::{Bowl, Sdf};
 use nalgebra::{Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -50,7 +50,7 @@ impl Shape {
     /// The signed distance field.
     pub fn sdf(&self) -> Arc<dyn Sdf> {
         match *self {
-            Shape::Sphere => Arc::new(irmirror_render::sdf::Sphere { radius: 1.0 }),
+            Shape::Sphere => Arc::new(crate::sdf::Sphere { radius: 1.0 }),
             Shape::Bowl { cut, wall } => {
                 // Shell radius so that the bowl fits the unit sphere.
                 let r = 0.95;

@@ -1,0 +1,468 @@
+//! Stage 2 (paper §3.4–3.5, DESIGN.md §1): the person, from the reflection mask, with the
+//! objects fixed.
+//!
+//! Parameters per hypothesis: root translation `t` (depth frame, m), root rotation
+//! `R = exp(ω) B` (`B` the initial orientation), pose latent `z` (32, the pose prior), shape
+//! fixed at the mean adult. Loss: `1 − soft IoU` between the soft occupancy of sampled reflected
+//! rays and the observed mask, plus `w_prior ‖z‖²`. Gradients: occupancy backward → vertices →
+//! body backward → rotations → pose prior VJP (all analytic; see the crates' FD tests).
+//!
+//! * **Edge sampling.** Each iteration draws `rays_per_iteration` rays without replacement with
+//!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
+//!   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the iterations (curriculum).
+//!   Ablated: uniform draws of the same count.
+//! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
+//! * **Initialisations.** `inits` hypotheses, run in parallel: root on the mean reflected ray of
+//!   the mask at distances spread over `init_distance_m`, upright on the support plane, facing
+//!   the objects give or take 60°, pose latent 0 for the first and prior samples (×0.5) for the
+//!   rest. The best by final full-ray loss is kept; the `top_k` distinct ones are reported.
+
+use crate::ReconError;
+use irmirror_body::prior::PosePrior;
+use irmirror_body::{BodyModel, Pose};
+use irmirror_body::model::{BodyGrad, OutputGrads};
+use irmirror_capture::Image;
+use irmirror_geom::rotation::{axis_angle_to_matrix, axis_angle_to_matrix_vjp, matrix_to_axis_angle};
+use irmirror_render::occupancy::{Culling, OccupancyGrad, OccupancyParams, SoftRenderer};
+use irmirror_render::reflect::ReflectedRays;
+use nalgebra::{Matrix3, Vector3};
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Stage-2 settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HumanConfig {
+    /// Random initialisations.
+    pub inits: usize,
+    /// Adam steps per initialisation.
+    pub iterations: usize,
+    /// Rays drawn per step (all when fewer).
+    pub rays_per_iteration: usize,
+    /// Edge sampling on/off (ablation switch).
+    pub edge_sampling: bool,
+    /// Final weight α of the edge term.
+    pub edge_mix: f64,
+    /// Edge length scale τ at the start and the end, pixels.
+    pub edge_tau_px: [f64; 2],
+    /// Occupancy σ at the start and the end, m².
+    pub sigma_m2: [f64; 2],
+    /// Learning rates: translation (m), rotation (rad), latent.
+    pub lr_translation: f64,
+    /// See `lr_translation`.
+    pub lr_rotation: f64,
+    /// See `lr_translation`.
+    pub lr_latent: f64,
+    /// Weight of `‖z‖²`.
+    pub w_prior: f64,
+    /// Weight of the upright prior `1 − (R ẑ)·n` (people stand on the support plane's side:
+    /// Anny's up should follow the plane normal; the pose bends the body, not the root).
+    pub w_upright: f64,
+    /// Initial root distances along the mean reflected ray, metres.
+    pub init_distance_m: [f64; 2],
+    /// Distinct hypotheses reported.
+    pub top_k: usize,
+}
+
+impl Default for HumanConfig {
+    fn default() -> Self {
+        Self {
+            inits: 8,
+            iterations: 120,
+            rays_per_iteration: 768,
+            edge_sampling: true,
+            edge_mix: 0.9,
+            edge_tau_px: [6.0, 1.5],
+            sigma_m2: [1e-3, 1e-4],
+            lr_translation: 0.04,
+            lr_rotation: 0.06,
+            lr_latent: 0.08,
+            w_prior: 2e-3,
+            w_upright: 0.05,
+            init_distance_m: [0.8, 2.6],
+            top_k: 3,
+        }
+    }
+}
+
+/// One fitted hypothesis.
+#[derive(Clone, Debug, Serialize)]
+pub struct Hypothesis {
+    /// Which initialisation it came from.
+    pub init: usize,
+    /// Root joint position, depth frame, metres.
+    pub translation_m: [f64; 3],
+    /// Root rotation (Anny frame → depth frame) as a rotation vector, radians.
+    pub root_rotvec_rad: [f64; 3],
+    /// Pose latent.
+    pub latent: Vec<f64>,
+    /// Final loss on all rays at the final σ.
+    pub loss: f64,
+    /// Soft IoU on all rays at the final σ.
+    pub soft_iou: f64,
+    /// Loss per step (on that step's sampled rays).
+    #[serde(skip)]
+    pub loss_curve: Vec<f64>,
+}
+
+/// Stage-2 result.
+#[derive(Clone, Debug, Serialize)]
+pub struct HumanFit {
+    /// Best hypothesis first, then up to `top_k − 1` distinct others (root > 25 cm apart or
+    /// facing > 45° apart), by loss.
+    pub hypotheses: Vec<Hypothesis>,
+    /// Initialisations that diverged (non-finite loss) and were dropped.
+    pub diverged: usize,
+    /// Reflected rays (object pixels) and mask pixels among them.
+    pub rays: usize,
+    /// Mask pixels with a ray.
+    pub mask_rays: usize,
+}
+
+/// Everything a fit needs that does not change between hypotheses.
+pub struct HumanProblem<'a> {
+    /// The body model.
+    pub model: &'a BodyModel,
+    /// The pose prior.
+    pub prior: &'a PosePrior,
+    /// Reflected rays of the object pixels (depth frame).
+    pub rays: &'a ReflectedRays<f64>,
+    /// Thermal-pixel reflection mask.
+    pub mask: &'a Image<bool>,
+    /// Support-plane normal (up), depth frame.
+    pub up: Vector3<f64>,
+    /// Centre of the objects, depth frame (the person faces it, roughly).
+    pub objects_centre: Vector3<f64>,
+}
+
+/// Per-pixel chamfer distance (3-4, in pixels) to the nearest edge of `mask` (inside or out).
+pub fn edge_distance(mask: &Image<bool>) -> Image<f64> {
+    let (w, h) = (mask.width as usize, mask.height as usize);
+    let big = 1e9;
+    let mut d = vec![big; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let m = mask.data[y * w + x];
+            let edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
+                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64 && mask.data[ny as usize * w + nx as usize] != m
+            });
+            if edge {
+                d[y * w + x] = 0.0;
+            }
+        }
+    }
+    let pass = |d: &mut Vec<f64>, xs: Vec<usize>, ys: Vec<usize>, offs: [(i64, i64, f64); 4]| {
+        for &y in &ys {
+            for &x in &xs {
+                for (dx, dy, c) in offs {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    if nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64 {
+                        let v = d[ny as usize * w + nx as usize] + c;
+                        if v < d[y * w + x] {
+                            d[y * w + x] = v;
+                        }
+                    }
+                }
+            }
+        }
+    };
+    let (a, b) = (1.0, 1.4142);
+    pass(&mut d, (0..w).collect(), (0..h).collect(), [(-1, 0, a), (0, -1, a), (-1, -1, b), (1, -1, b)]);
+    pass(&mut d, (0..w).rev().collect(), (0..h).rev().collect(), [(1, 0, a), (0, 1, a), (1, 1, b), (-1, 1, b)]);
+    Image { width: mask.width, height: mask.height, data: d }
+}
+
+/// Soft IoU of occupancies `v` against targets `t` (same rays) and `∂(1 − IoU)/∂v`.
+fn soft_iou(v: &[f64], t: &[f64], d: &mut Vec<f64>) -> (f64, f64) {
+    let (mut inter, mut union) = (0.0, 0.0);
+    for (&a, &b) in v.iter().zip(t) {
+        inter += a * b;
+        union += a + b - a * b;
+    }
+    d.clear();
+    if union <= 0.0 {
+        d.resize(v.len(), 0.0);
+        return (1.0, 0.0);
+    }
+    let u2 = union * union;
+    d.extend(t.iter().map(|&b| -(b * union - inter * (1.0 - b)) / u2));
+    (1.0 - inter / union, inter / union)
+}
+
+fn subset(rays: &ReflectedRays<f64>, idx: &[usize], out: &mut ReflectedRays<f64>) {
+    out.width = rays.width;
+    out.height = rays.height;
+    out.pixel.clear();
+    out.object.clear();
+    out.origin.clear();
+    out.dir.clear();
+    out.normal.clear();
+    for &i in idx {
+        out.pixel.push(rays.pixel[i]);
+        out.object.push(rays.object[i]);
+        out.origin.push(rays.origin[i]);
+        out.dir.push(rays.dir[i]);
+        out.normal.push(rays.normal[i]);
+    }
+}
+
+/// A rotation taking Anny's +Z (up) to `up` and Anny's front (−Y) towards `facing` (projected
+/// onto the plane).
+pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> {
+    let z = up.normalize();
+    let mut f = facing - z * z.dot(facing);
+    if f.norm() < 1e-9 {
+        f = if z.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        f -= z * z.dot(&f);
+    }
+    let front = f.normalize();
+    // Columns: images of Anny's X, Y, Z. Anny's −Y is the front, so Y ↦ −front; X = Y × Z.
+    let y = -front;
+    let x = y.cross(&z);
+    Matrix3::from_columns(&[x, y, z])
+}
+
+/// Adam state over a flat parameter vector.
+struct Adam {
+    m: Vec<f64>,
+    v: Vec<f64>,
+    t: i32,
+}
+
+impl Adam {
+    fn new(n: usize) -> Self {
+        Self { m: vec![0.0; n], v: vec![0.0; n], t: 0 }
+    }
+    fn step(&mut self, g: &[f64], lr: &[f64], out: &mut [f64]) {
+        self.t += 1;
+        let (b1, b2) = (0.9f64, 0.999f64);
+        for k in 0..g.len() {
+            self.m[k] = b1 * self.m[k] + (1.0 - b1) * g[k];
+            self.v[k] = b2 * self.v[k] + (1.0 - b2) * g[k] * g[k];
+            let mh = self.m[k] / (1.0 - b1.powi(self.t));
+            let vh = self.v[k] / (1.0 - b2.powi(self.t));
+            out[k] = lr[k] * mh / (vh.sqrt() + 1e-10);
+        }
+    }
+}
+
+/// The state of one hypothesis.
+#[derive(Clone, Debug)]
+pub struct HumanState {
+    /// Root position, depth frame, m.
+    pub translation: Vector3<f64>,
+    /// Root rotation, Anny → depth.
+    pub rotation: Matrix3<f64>,
+    /// Pose latent.
+    pub latent: Vec<f64>,
+}
+
+impl HumanProblem<'_> {
+    /// The pose of a state (36 rotations; root first).
+    pub fn pose(&self, st: &HumanState) -> Result<Pose<f64>, ReconError> {
+        let mut rotations = self.prior.decode(&st.latent).map_err(|e| ReconError::Prior(e.to_string()))?;
+        rotations[0] = st.rotation;
+        Ok(Pose { rotations, translation: st.translation })
+    }
+
+    /// Loss of a state on all rays at σ (and soft IoU).
+    pub fn full_loss(&self, st: &HumanState, sigma_m2: f64, w_prior: f64, w_upright: f64) -> Result<(f64, f64), ReconError> {
+        let shaped = self.model.shaped::<f64>(&vec![0.0; self.model.rank()]).map_err(|e| ReconError::Prior(e.to_string()))?;
+        let posed = self.model.pose(&shaped, &self.pose(st)?).map_err(|e| ReconError::Prior(e.to_string()))?;
+        let renderer = SoftRenderer::new(&posed.vertices, &self.model.asset.faces);
+        let params = OccupancyParams { sigma_m2, ..OccupancyParams::default() };
+        let occ = renderer.forward(self.rays, &params, Culling::Bvh);
+        let target: Vec<f64> = self.rays.pixel.iter().map(|&p| f64::from(u8::from(self.mask.data[p as usize]))).collect();
+        let mut d = Vec::new();
+        let (l, iou) = soft_iou(&occ.value, &target, &mut d);
+        let prior: f64 = st.latent.iter().map(|x| x * x).sum();
+        let upright = 1.0 - (st.rotation * Vector3::z()).dot(&self.up.normalize());
+        Ok((l + w_prior * prior + w_upright * upright, iou))
+    }
+
+    /// Initial states (deterministic for `seed`).
+    pub fn initial_states(&self, cfg: &HumanConfig, seed: u64) -> Result<Vec<HumanState>, ReconError> {
+        let mask_rays: Vec<usize> = (0..self.rays.len()).filter(|&i| self.mask.data[self.rays.pixel[i] as usize]).collect();
+        if mask_rays.is_empty() {
+            return Err(ReconError::NoMaskRays);
+        }
+        let o = mask_rays.iter().fold(Vector3::zeros(), |a, &i| a + self.rays.origin[i]) / mask_rays.len() as f64;
+        let d = mask_rays.iter().fold(Vector3::zeros(), |a, &i| a + self.rays.dir[i]).try_normalize(1e-12).ok_or(ReconError::NoMaskRays)?;
+        let mut rng = irmirror_geom::rng::seeded(seed, 21);
+        let n = cfg.inits.max(1);
+        let mut out = Vec::with_capacity(n);
+        for k in 0..n {
+            let frac = (k as f64 + rng.random_range(0.2..0.8)) / n as f64;
+            let dist = cfg.init_distance_m[0] + (cfg.init_distance_m[1] - cfg.init_distance_m[0]) * frac;
+            let p = o + d * dist;
+            let facing = self.objects_centre - p;
+            let base = upright_facing(&self.up, &facing);
+            let yaw: f64 = rng.random_range(-1.0..1.0);
+            let rotation = axis_angle_to_matrix(&(self.up.normalize() * yaw)) * base;
+            let latent: Vec<f64> = if k == 0 {
+                vec![0.0; irmirror_body::prior::LATENT]
+            } else {
+                (0..irmirror_body::prior::LATENT).map(|_| { let x: f64 = StandardNormal.sample(&mut rng); 0.5 * x }).collect::<Vec<f64>>()
+            };
+            out.push(HumanState { translation: p, rotation, latent });
+        }
+        Ok(out)
+    }
+
+    /// Runs one hypothesis from `init`; returns the final state and the per-step loss, or `None`
+    /// if it diverged.
+    pub fn run(&self, init: &HumanState, cfg: &HumanConfig, edge_dist: &Image<f64>, seed: u64) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
+        let err = |e: String| ReconError::Prior(e);
+        let model = self.model;
+        let shaped = model.shaped::<f64>(&vec![0.0; model.rank()]).map_err(|e| err(e.to_string()))?;
+        let mut posed = model.posed_buffers::<f64>();
+        let mut st = init.clone();
+        let base = st.rotation;
+        let mut omega = Vector3::zeros();
+        let n_lat = st.latent.len();
+        let mut adam = Adam::new(6 + n_lat);
+        let mut lr = vec![cfg.lr_translation; 3];
+        lr.extend([cfg.lr_rotation; 3]);
+        lr.extend(vec![cfg.lr_latent; n_lat]);
+        let mut renderer: Option<SoftRenderer<f64>> = None;
+        let mut rng = irmirror_geom::rng::seeded(seed, 31);
+        let target_all: Vec<f64> = self.rays.pixel.iter().map(|&p| f64::from(u8::from(self.mask.data[p as usize]))).collect();
+        let e_all: Vec<f64> = self.rays.pixel.iter().map(|&p| edge_dist.data[p as usize]).collect();
+        let (mut sub, mut target, mut d_value, mut keys) = (ReflectedRays::default(), Vec::new(), Vec::new(), Vec::<(f64, usize)>::new());
+        let mut og = OccupancyGrad::default();
+        let mut bg = BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] };
+        let mut curve = Vec::with_capacity(cfg.iterations);
+        let (mut g, mut step) = (vec![0.0; 6 + n_lat], vec![0.0; 6 + n_lat]);
+        let iters = cfg.iterations.max(1);
+        for it in 0..iters {
+            let progress = it as f64 / (iters - 1).max(1) as f64;
+            let sigma = cfg.sigma_m2[0] * (cfg.sigma_m2[1] / cfg.sigma_m2[0]).powf(progress);
+            // Draw the rays (Efraimidis–Spirakis weighted sampling without replacement).
+            let m = cfg.rays_per_iteration.min(self.rays.len());
+            let (alpha, tau) = if cfg.edge_sampling {
+                (cfg.edge_mix * progress, cfg.edge_tau_px[0] + (cfg.edge_tau_px[1] - cfg.edge_tau_px[0]) * progress)
+            } else {
+                (0.0, 1.0)
+            };
+            keys.clear();
+            for (i, &e) in e_all.iter().enumerate() {
+                let w = (1.0 - alpha) + alpha * (-e / tau).exp();
+                let u: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+                keys.push((u.ln() / w, i));
+            }
+            if m < keys.len() {
+                keys.select_nth_unstable_by(m, |a, b| b.0.total_cmp(&a.0));
+                keys.truncate(m);
+            }
+            keys.sort_by_key(|k| k.1);
+            let idx: Vec<usize> = keys.iter().map(|k| k.1).collect();
+            subset(self.rays, &idx, &mut sub);
+            target.clear();
+            target.extend(idx.iter().map(|&i| target_all[i]));
+
+            // Forward.
+            st.rotation = axis_angle_to_matrix(&omega) * base;
+            let pose = self.pose(&st)?;
+            model.pose_into(&shaped, &pose, &mut posed).map_err(|e| err(e.to_string()))?;
+            let r = renderer.get_or_insert_with(|| SoftRenderer::new(&posed.vertices, &model.asset.faces));
+            r.set_vertices(&posed.vertices);
+            let params = OccupancyParams { sigma_m2: sigma, ..OccupancyParams::default() };
+            let occ = r.forward(&sub, &params, Culling::Bvh);
+            let (l_iou, _) = soft_iou(&occ.value, &target, &mut d_value);
+            let prior: f64 = st.latent.iter().map(|x| x * x).sum();
+            let up = self.up.normalize();
+            let upright = 1.0 - (st.rotation * Vector3::z()).dot(&up);
+            let loss = l_iou + cfg.w_prior * prior + cfg.w_upright * upright;
+            if !loss.is_finite() {
+                return Ok(None);
+            }
+            curve.push(loss);
+
+            // Backward.
+            r.backward(&sub, &occ, &d_value, &params, Culling::Bvh, &mut og);
+            model.backward(&shaped, &pose, &mut posed, OutputGrads { vertices: Some(&og.vertices), ..Default::default() }, &mut bg);
+            // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
+            bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
+            let d_omega = axis_angle_to_matrix_vjp(&omega, &(bg.rotations[0] * base.transpose()));
+            let d_lat = self.prior.decode_vjp(&st.latent, &bg.rotations).map_err(|e| err(e.to_string()))?;
+            g[..3].copy_from_slice(bg.translation.as_slice());
+            g[3..6].copy_from_slice(d_omega.as_slice());
+            for k in 0..n_lat {
+                g[6 + k] = d_lat[k] + cfg.w_prior * 2.0 * st.latent[k];
+            }
+            if g.iter().any(|x| !x.is_finite()) {
+                return Ok(None);
+            }
+            adam.step(&g, &lr, &mut step);
+            // Learning rates decay by cosine to 10 %.
+            let decay = 0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos());
+            st.translation -= Vector3::new(step[0], step[1], step[2]) * decay;
+            omega -= Vector3::new(step[3], step[4], step[5]) * decay;
+            for k in 0..n_lat {
+                st.latent[k] -= step[6 + k] * decay;
+            }
+        }
+        st.rotation = axis_angle_to_matrix(&omega) * base;
+        Ok(Some((st, curve)))
+    }
+}
+
+/// Fits the person: every initialisation in parallel, best first, distinct top-k.
+pub fn fit_human(problem: &HumanProblem<'_>, cfg: &HumanConfig, seed: u64, progress: &(dyn Fn(usize) + Sync)) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
+    let inits = problem.initial_states(cfg, seed)?;
+    let edge_dist = edge_distance(problem.mask);
+    let results: Vec<Result<Option<(usize, HumanState, Vec<f64>)>, ReconError>> = inits
+        .par_iter()
+        .enumerate()
+        .map(|(k, init)| {
+            let r = problem.run(init, cfg, &edge_dist, seed.wrapping_mul(1000).wrapping_add(k as u64))?;
+            progress(k);
+            Ok(r.map(|(s, c)| (k, s, c)))
+        })
+        .collect();
+    let mut done = Vec::new();
+    let mut diverged = 0;
+    for r in results {
+        match r? {
+            Some(x) => done.push(x),
+            None => diverged += 1,
+        }
+    }
+    if done.is_empty() {
+        return Err(ReconError::Diverged { inits: diverged });
+    }
+    let mut scored: Vec<(Hypothesis, HumanState)> = done
+        .into_par_iter()
+        .map(|(k, st, curve)| {
+            let (loss, iou) = problem.full_loss(&st, cfg.sigma_m2[1], cfg.w_prior, cfg.w_upright)?;
+            let h = Hypothesis {
+                init: k,
+                translation_m: st.translation.into(),
+                root_rotvec_rad: matrix_to_axis_angle(&st.rotation).into(),
+                latent: st.latent.clone(),
+                loss,
+                soft_iou: iou,
+                loss_curve: curve,
+            };
+            Ok((h, st))
+        })
+        .collect::<Result<_, ReconError>>()?;
+    scored.sort_by(|a, b| a.0.loss.total_cmp(&b.0.loss));
+    let mut kept: Vec<(Hypothesis, HumanState)> = Vec::new();
+    for (h, s) in scored {
+        let distinct = kept.iter().all(|(_, k)| {
+            let far = (k.translation - s.translation).norm() > 0.25;
+            let turned = (k.rotation.transpose() * s.rotation).trace() < 1.0 + 2.0 * 45f64.to_radians().cos();
+            far || turned
+        });
+        if distinct && kept.len() < cfg.top_k.max(1) {
+            kept.push((h, s));
+        }
+    }
+    let mask_rays = problem.rays.pixel.iter().filter(|&&p| problem.mask.data[p as usize]).count();
+    let (hyps, states): (Vec<Hypothesis>, Vec<HumanState>) = kept.into_iter().unzip();
+    Ok((HumanFit { hypotheses: hyps, diverged, rays: problem.rays.len(), mask_rays }, states))
+}

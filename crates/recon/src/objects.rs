@@ -1,0 +1,534 @@
+//! Stage 1 (paper §3.5 "3D object reconstruction", DESIGN.md §1): per object, the similarity
+//! `depth_from_object` (R, t, s) and the shape parameters of its category's prior, fitted to the
+//! depth points inside its mask.
+//!
+//! The prior today is the procedural family of [`irmirror_render::shapes`] (2 parameters per
+//! category); the learned DeepSDF priors of issue 4 will slot in behind the same [`Family`].
+//!
+//! Loss (all distances in units of the initial object size `s₀`, so one schedule fits a mug and
+//! a car):
+//! * `L_depth` — Huber of the signed distance of every observed surface point (the point form of
+//!   the depth term: zero exactly when the surface passes through the measured depth);
+//! * `L_mask` — free space: points just in front of the observed surface, and points along the
+//!   rays of a ring of pixels around the mask (where the depth camera saw past the object), must
+//!   lie outside (hinge on `−d`): this is what keeps the silhouette from growing;
+//! * `L_prior` — the object stands upright on the support plane: `‖R ŷ − n‖²` and the base's
+//!   height above the plane squared.
+//!
+//! Optimiser: Adam on (rotation tangent δ, t, log s, shape u ∈ [0,1]²), learning rates decaying
+//! by cosine to 5 %, `iterations` steps from each restart (yaws evenly spread about the plane
+//! normal), best final loss kept. Rotation and translation gradients are analytic (chain rule
+//! through the SDF gradient); shape gradients are central differences (2 parameters).
+
+use crate::ReconError;
+use crate::morphology::dilate;
+use crate::plane::Plane;
+use irmirror_capture::Image;
+use irmirror_geom::rotation::axis_angle_to_matrix;
+use irmirror_geom::{PinholeCamera, Similarity3};
+use irmirror_render::sdf::{PlacedSdf, Sdf};
+use irmirror_render::shapes::Shape;
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// A category's shape family: parameters mapped from the unit box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Family {
+    /// [`Shape::Sphere`] (no parameters).
+    Sphere,
+    /// [`Shape::Bowl`]: `cut ∈ [−0.6, 0.3]`, `wall ∈ [0.02, 0.12]`.
+    Bowl,
+    /// [`Shape::Mug`]: `aspect ∈ [0.6, 1.6]`, `wall ∈ [0.04, 0.2]`.
+    Mug,
+    /// [`Shape::Car`]: `cabin ∈ [0.4, 0.75]`, `height ∈ [0.22, 0.42]`.
+    Car,
+}
+
+impl Family {
+    /// Categories with a prior.
+    pub const KNOWN: [&'static str; 4] = ["bowl", "mug", "car", "sphere"];
+
+    /// The family of a capture category.
+    pub fn of(category: &str) -> Result<Self, ReconError> {
+        match category {
+            "bowl" => Ok(Self::Bowl),
+            "mug" | "cup" => Ok(Self::Mug),
+            "car" => Ok(Self::Car),
+            "sphere" | "ball" => Ok(Self::Sphere),
+            other => Err(ReconError::UnknownCategory { category: other.into(), known: Self::KNOWN.join(", ") }),
+        }
+    }
+
+    fn ranges(self) -> &'static [(f64, f64)] {
+        match self {
+            Self::Sphere => &[],
+            Self::Bowl => &[(-0.6, 0.3), (0.02, 0.12)],
+            Self::Mug => &[(0.6, 1.6), (0.04, 0.2)],
+            Self::Car => &[(0.4, 0.75), (0.22, 0.42)],
+        }
+    }
+
+    /// Number of shape parameters.
+    pub fn dims(self) -> usize {
+        self.ranges().len()
+    }
+
+    /// The shape for unit-box parameters `u` (clamped).
+    pub fn shape(self, u: &[f64]) -> Shape {
+        let p: Vec<f64> = self.ranges().iter().zip(u).map(|(&(lo, hi), &x)| lo + (hi - lo) * x.clamp(0.0, 1.0)).collect();
+        match self {
+            Self::Sphere => Shape::Sphere,
+            Self::Bowl => Shape::Bowl { cut: p[0], wall: p[1] },
+            Self::Mug => Shape::Mug { aspect: p[0], wall: p[1] },
+            Self::Car => Shape::Car { cabin: p[0], height: p[1] },
+        }
+    }
+
+    /// Yaw restarts: none for a body of revolution, front/back for a car, four for a mug.
+    fn yaws(self, restarts: u32) -> Vec<f64> {
+        let n = match self {
+            Self::Sphere | Self::Bowl => 1,
+            Self::Car => restarts.clamp(1, 2),
+            Self::Mug => restarts.max(1),
+        };
+        (0..n).map(|k| std::f64::consts::TAU * k as f64 / n as f64).collect()
+    }
+}
+
+/// Stage-1 settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObjectConfig {
+    /// Adam steps per restart.
+    pub iterations: u32,
+    /// Yaw restarts for shapes that are not bodies of revolution.
+    pub restarts: u32,
+    /// Surface points used (evenly subsampled).
+    pub max_points: usize,
+    /// Initial learning rates: rotation (rad), translation and log-scale (in s₀), shape (unit box).
+    pub lr_rotation: f64,
+    /// See `lr_rotation`.
+    pub lr_translation: f64,
+    /// See `lr_rotation`.
+    pub lr_scale: f64,
+    /// See `lr_rotation`.
+    pub lr_shape: f64,
+    /// Huber width of `L_depth`, metres.
+    pub huber_m: f64,
+    /// Weights of `L_mask` and `L_prior`.
+    pub w_free: f64,
+    /// See `w_free`.
+    pub w_plane: f64,
+    /// Ring of pixels around the mask that must be free space, pixels.
+    pub ring_px: u32,
+}
+
+impl Default for ObjectConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 160,
+            restarts: 4,
+            max_points: 800,
+            lr_rotation: 0.05,
+            lr_translation: 0.04,
+            lr_scale: 0.04,
+            lr_shape: 0.05,
+            huber_m: 0.003,
+            w_free: 1.0,
+            w_plane: 0.3,
+            ring_px: 3,
+        }
+    }
+}
+
+/// One fitted object.
+#[derive(Clone, Debug, Serialize)]
+pub struct FittedObject {
+    /// Category (from the capture, or the best-fitting family).
+    pub category: String,
+    /// Fitted shape and parameters.
+    pub shape: Shape,
+    /// Object frame → depth frame (rotation, translation in metres, scale in metres per unit).
+    #[serde(serialize_with = "ser_sim")]
+    pub depth_from_object: Similarity3<f64>,
+    /// Final loss of the kept restart.
+    pub loss: f64,
+    /// Mean |signed distance| of the observed surface points to the fitted surface, metres.
+    pub mean_surface_error_m: f64,
+    /// Observed points used.
+    pub points: usize,
+    /// Loss after every iteration of the kept restart.
+    #[serde(skip)]
+    pub loss_curve: Vec<f64>,
+}
+
+fn ser_sim<S: serde::Serializer>(s: &Similarity3<f64>, ser: S) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeStruct;
+    let r = s.rotation;
+    let mut st = ser.serialize_struct("Similarity", 3)?;
+    st.serialize_field("rotation", &[[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]])?;
+    st.serialize_field("translation_m", &[s.translation.x, s.translation.y, s.translation.z])?;
+    st.serialize_field("scale_m", &s.scale)?;
+    st.end()
+}
+
+impl FittedObject {
+    /// The object as a renderer SDF.
+    pub fn placed(&self) -> PlacedSdf {
+        PlacedSdf { sdf: self.shape.sdf(), depth_from_object: self.depth_from_object }
+    }
+}
+
+/// What one object's fit sees (depth frame, metres).
+#[derive(Clone, Debug, Default)]
+pub struct ObjectObservation {
+    /// Observed surface points.
+    pub surface: Vec<Vector3<f64>>,
+    /// Points that must be outside the object (in front of the surface, or on rays that saw past
+    /// it).
+    pub free: Vec<Vector3<f64>>,
+}
+
+/// Lifts a depth-pixel mask to the observation of one object.
+pub fn observe(depth_m: &Image<f32>, camera: &PinholeCamera, mask: &Image<bool>, cfg: &ObjectConfig) -> Result<ObjectObservation, ReconError> {
+    let (w, h) = (depth_m.width, depth_m.height);
+    let valid = |i: usize| depth_m.data[i].is_finite() && depth_m.data[i] > 0.0;
+    let idx: Vec<usize> = (0..(w * h) as usize).filter(|&i| mask.data[i] && valid(i)).collect();
+    if idx.len() < 10 {
+        return Err(ReconError::EmptyObject { pixels: idx.len() });
+    }
+    let stride = idx.len().div_ceil(cfg.max_points).max(1);
+    let point = |i: usize| camera.unproject((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5, f64::from(depth_m.data[i]));
+    let surface: Vec<Vector3<f64>> = idx.iter().step_by(stride).map(|&i| point(i)).collect();
+    let zs: Vec<f64> = surface.iter().map(|p| p.z).collect();
+    let (zmin, zmax) = zs.iter().fold((f64::MAX, f64::MIN), |(a, b), &z| (a.min(z), b.max(z)));
+    let extent = (zmax - zmin).max(0.02);
+    let mut free = Vec::new();
+    // In front of the surface by 5 % of the object's depth extent, along the camera ray.
+    for p in &surface {
+        free.push(p * (1.0 - 0.05 * extent / p.z));
+    }
+    // The ring: the camera saw past (or missed) the object there.
+    let ring = dilate(mask, cfg.ring_px);
+    let ring_idx: Vec<usize> = (0..(w * h) as usize).filter(|&i| ring.data[i] && !mask.data[i]).collect();
+    let ring_stride = ring_idx.len().div_ceil(cfg.max_points / 2).max(1);
+    for &i in ring_idx.iter().step_by(ring_stride) {
+        let far = if valid(i) { f64::from(depth_m.data[i]) - 0.02 * extent } else { zmax + extent };
+        for k in 0..RING_SAMPLES {
+            let z = zmin - 0.25 * extent + (zmax - zmin + 0.5 * extent) * k as f64 / (RING_SAMPLES - 1) as f64;
+            if z < far {
+                free.push(camera.unproject((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5, z));
+            }
+        }
+    }
+    Ok(ObjectObservation { surface, free })
+}
+
+/// Free-space samples along each ring ray (dense enough not to fall through a thin wall into a
+/// cavity).
+const RING_SAMPLES: usize = 12;
+
+/// Parameters of one restart.
+#[derive(Clone, Copy, Debug)]
+struct State {
+    rotation: Matrix3<f64>,
+    translation: Vector3<f64>,
+    log_scale: f64,
+    u: [f64; 2],
+}
+
+impl State {
+    fn sim(&self) -> Similarity3<f64> {
+        Similarity3 { rotation: self.rotation, translation: self.translation, scale: self.log_scale.exp() }
+    }
+}
+
+/// Loss and gradient: (δ, t, log s) analytic; shape by central differences.
+struct Problem<'a> {
+    family: Family,
+    obs: &'a ObjectObservation,
+    plane: &'a Plane,
+    s0: f64,
+    cfg: &'a ObjectConfig,
+}
+
+struct Grad {
+    rot: Vector3<f64>,
+    t: Vector3<f64>,
+    log_s: f64,
+}
+
+impl Problem<'_> {
+    fn loss(&self, st: &State, sdf: &dyn Sdf, base_y: f64, mut grad: Option<&mut Grad>) -> f64 {
+        let (r, t, s) = (st.rotation, st.translation, st.log_scale.exp());
+        let inv = 1.0 / self.s0;
+        let hub = self.cfg.huber_m * inv;
+        let mut loss = 0.0;
+        let mut acc = |p: &Vector3<f64>, weight: f64, surface: bool, grad: &mut Option<&mut Grad>| {
+            let q = r.tr_mul(&(p - t)) / s;
+            let d = s * sdf.distance(&q) * inv;
+            // Value and derivative of the per-point term in d.
+            let (f, df) = if surface {
+                if d.abs() <= hub { (0.5 * d * d / hub, d / hub) } else { (d.abs() - 0.5 * hub, d.signum()) }
+            } else if d < 0.0 {
+                (-d, -1.0)
+            } else {
+                (0.0, 0.0)
+            };
+            loss += weight * f;
+            if let Some(g) = grad.as_deref_mut()
+                && df != 0.0
+            {
+                let gq = sdf.gradient(&q);
+                let u = r * gq; // ∂(s·sdf)/∂p, depth frame
+                let c = weight * df * inv;
+                g.t -= u * c;
+                g.log_s += c * s * (sdf.distance(&q) - gq.dot(&q));
+                g.rot += u.cross(&(p - t)) * c;
+            }
+        };
+        let ws = 1.0 / self.obs.surface.len() as f64;
+        for p in &self.obs.surface {
+            acc(p, ws, true, &mut grad);
+        }
+        if !self.obs.free.is_empty() {
+            let wf = self.cfg.w_free / self.obs.free.len() as f64;
+            for p in &self.obs.free {
+                acc(p, wf, false, &mut grad);
+            }
+        }
+        // Upright on the plane.
+        let n = self.plane.n();
+        let up = r * Vector3::y();
+        let e_up = up - n;
+        let wp = self.cfg.w_plane;
+        loss += wp * e_up.norm_squared();
+        let base = r * Vector3::new(0.0, base_y, 0.0) * s;
+        let e_base = if self.plane.found { (n.dot(&(t + base)) - self.plane.offset_m) * inv } else { 0.0 };
+        loss += wp * e_base * e_base;
+        if let Some(g) = grad {
+            g.rot += up.cross(&(e_up * 2.0)) * wp;
+            let c = 2.0 * wp * e_base * inv;
+            g.t += n * c;
+            g.log_s += c * n.dot(&base);
+            g.rot += base.cross(&n) * c;
+        }
+        loss
+    }
+
+    fn eval(&self, st: &State, grad: Option<&mut Grad>) -> f64 {
+        let shape = self.family.shape(&st.u);
+        self.loss(st, shape.sdf().as_ref(), shape.base_y(), grad)
+    }
+
+    fn run(&self, init: State) -> (State, f64, Vec<f64>) {
+        let mut st = init;
+        let n_u = self.family.dims();
+        let mut m = [0.0; 9];
+        let mut v = [0.0; 9];
+        let (b1, b2) = (0.9f64, 0.999f64);
+        let lrs = [
+            self.cfg.lr_rotation, self.cfg.lr_rotation, self.cfg.lr_rotation,
+            self.cfg.lr_translation * self.s0, self.cfg.lr_translation * self.s0, self.cfg.lr_translation * self.s0,
+            self.cfg.lr_scale, self.cfg.lr_shape, self.cfg.lr_shape,
+        ];
+        let mut curve = Vec::with_capacity(self.cfg.iterations as usize);
+        let iters = self.cfg.iterations.max(1);
+        for it in 0..iters {
+            let mut g = Grad { rot: Vector3::zeros(), t: Vector3::zeros(), log_s: 0.0 };
+            let loss = self.eval(&st, Some(&mut g));
+            curve.push(loss);
+            let mut flat = [g.rot.x, g.rot.y, g.rot.z, g.t.x, g.t.y, g.t.z, g.log_s, 0.0, 0.0];
+            for k in 0..n_u {
+                let h = 1e-3;
+                let (mut a, mut b) = (st, st);
+                a.u[k] = (a.u[k] + h).min(1.0);
+                b.u[k] = (b.u[k] - h).max(0.0);
+                flat[7 + k] = (self.eval(&a, None) - self.eval(&b, None)) / (a.u[k] - b.u[k]).max(1e-12);
+            }
+            let schedule = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / iters as f64).cos());
+            let mut step = [0.0; 9];
+            for k in 0..9 {
+                m[k] = b1 * m[k] + (1.0 - b1) * flat[k];
+                v[k] = b2 * v[k] + (1.0 - b2) * flat[k] * flat[k];
+                let mh = m[k] / (1.0 - b1.powi(it as i32 + 1));
+                let vh = v[k] / (1.0 - b2.powi(it as i32 + 1));
+                step[k] = lrs[k] * schedule * mh / (vh.sqrt() + 1e-12);
+            }
+            // Left perturbation R ← exp(−step) R (the gradient was taken w.r.t. it).
+            st.rotation = axis_angle_to_matrix(&Vector3::new(-step[0], -step[1], -step[2])) * st.rotation;
+            st.translation -= Vector3::new(step[3], step[4], step[5]);
+            st.log_scale -= step[6];
+            for k in 0..n_u {
+                st.u[k] = (st.u[k] - step[7 + k]).clamp(0.0, 1.0);
+            }
+        }
+        let final_loss = self.eval(&st, None);
+        curve.push(final_loss);
+        (st, final_loss, curve)
+    }
+}
+
+/// A rotation taking +Y to `n`, then turned by `yaw` about `n`.
+fn upright(n: &Vector3<f64>, yaw: f64) -> Matrix3<f64> {
+    let y = n.normalize();
+    let helper = if y.x.abs() < 0.9 { Vector3::x() } else { Vector3::z() };
+    let x = (helper - y * helper.dot(&y)).normalize();
+    let z = x.cross(&y);
+    let base = Matrix3::from_columns(&[x, y, z]);
+    base * axis_angle_to_matrix(&Vector3::new(0.0, yaw, 0.0))
+}
+
+/// Fits one object of `family` to `obs`, standing on `plane`.
+pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &ObjectConfig) -> FittedObject {
+    let n = plane.n();
+    let centroid = obs.surface.iter().fold(Vector3::zeros(), |a, p| a + p) / obs.surface.len() as f64;
+    // Size from the spread of the points across the plane.
+    let horizontal = |p: &Vector3<f64>| {
+        let d = p - centroid;
+        (d - n * n.dot(&d)).norm()
+    };
+    let mut spread: Vec<f64> = obs.surface.iter().map(horizontal).collect();
+    spread.sort_by(f64::total_cmp);
+    let r95 = spread[(spread.len() as f64 * 0.95) as usize].max(1e-3);
+    let s0 = match family {
+        Family::Car => r95 / 0.8,
+        _ => r95 / 0.85,
+    };
+    let problem = Problem { family, obs, plane, s0, cfg };
+    // Restarts: yaws × a low and a high first shape parameter (proportions trade against
+    // scale, a local minimum the fit does not leave on its own).
+    let firsts: &[f64] = if family.dims() > 0 { &[0.25, 0.75] } else { &[0.5] };
+    let inits: Vec<State> = family
+        .yaws(cfg.restarts)
+        .into_iter()
+        .flat_map(|yaw| firsts.iter().map(move |&u0| (yaw, u0)))
+        .map(|(yaw, u0)| {
+            let rotation = upright(&n, yaw);
+            let u = [u0, 0.5];
+            let shape = family.shape(&u);
+            // Centre over the centroid, base on the plane.
+            let over = if plane.found { centroid - n * plane.height(&centroid) } else { centroid - n * s0 * shape.base_y().abs() };
+            let translation = over - rotation * Vector3::new(0.0, shape.base_y(), 0.0) * s0;
+            State { rotation, translation, log_scale: s0.ln(), u }
+        })
+        .collect();
+    let runs: Vec<(State, f64, Vec<f64>)> = inits.into_par_iter().map(|s| problem.run(s)).collect();
+    let (st, loss, curve) = runs.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)).expect("at least one restart");
+    let shape = family.shape(&st.u);
+    let sim = st.sim();
+    let placed = PlacedSdf { sdf: shape.sdf(), depth_from_object: sim };
+    let mean = obs.surface.iter().map(|p| placed.distance(p).abs()).sum::<f64>() / obs.surface.len() as f64;
+    FittedObject {
+        category: shape.category().into(),
+        shape,
+        depth_from_object: sim,
+        loss,
+        mean_surface_error_m: mean,
+        points: obs.surface.len(),
+        loss_curve: curve,
+    }
+}
+
+/// Stage-1 settings (plane, segmentation, fit).
+#[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Stage1Config {
+    /// Support-plane RANSAC.
+    pub plane: crate::plane::PlaneConfig,
+    /// Segmentation of objects without masks.
+    pub segment: crate::segment::SegmentConfig,
+    /// Per-object fit.
+    pub fit: ObjectConfig,
+}
+
+/// Stage-1 products.
+#[derive(Clone, Debug)]
+pub struct Objects {
+    /// The support plane.
+    pub plane: Plane,
+    /// Fitted objects, in the capture's object order.
+    pub objects: Vec<FittedObject>,
+    /// The depth-pixel mask each object was fitted to.
+    pub masks: Vec<Image<bool>>,
+    /// Which masks came from segmentation (rather than the capture).
+    pub segmented: Vec<bool>,
+}
+
+impl Objects {
+    /// The fitted objects as renderer SDFs.
+    pub fn placed(&self) -> Vec<PlacedSdf> {
+        self.objects.iter().map(FittedObject::placed).collect()
+    }
+}
+
+/// Stage 1 on a loaded capture: support plane, masks (given or segmented), one fit per object.
+pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Config, seed: u64) -> Result<Objects, ReconError> {
+    let depth = &capture.depth_m;
+    let cam = &capture.depth_camera;
+    let points = crate::segment::depth_points(depth, cam);
+    let families: Vec<Family> = capture.objects.iter().map(|o| Family::of(&o.category)).collect::<Result<_, _>>()?;
+    let mut given = vec![false; points.len()];
+    for o in &capture.objects {
+        if let Some(m) = &o.mask {
+            for (g, &b) in given.iter_mut().zip(&m.data) {
+                *g |= b;
+            }
+        }
+    }
+    let candidates: Vec<Vector3<f64>> = points.iter().zip(&given).filter_map(|(p, &g)| if g { None } else { *p }).collect();
+    let stride = candidates.len().div_ceil(20_000).max(1);
+    let sub: Vec<Vector3<f64>> = candidates.into_iter().step_by(stride).collect();
+    let mut rng = irmirror_geom::rng::seeded(seed, 11);
+    let plane = crate::plane::fit_plane(&sub, &cfg.plane, &mut rng).unwrap_or_else(Plane::camera_up);
+
+    // Masks: given, or the largest clusters above the plane for the objects without one.
+    let missing = capture.objects.iter().filter(|o| o.mask.is_none()).count();
+    if missing > 0 && !plane.found {
+        return Err(ReconError::NoSupportPlane);
+    }
+    let mut clusters = if missing > 0 { crate::segment::segment(&points, depth.width, depth.height, &plane, &given, &cfg.segment) } else { vec![] };
+    if clusters.len() < missing {
+        return Err(ReconError::Segmentation { wanted: missing, found: clusters.len() });
+    }
+    clusters.truncate(missing);
+    let mut clusters = clusters.into_iter();
+    let mut masks = Vec::new();
+    let mut segmented = Vec::new();
+    for o in &capture.objects {
+        match &o.mask {
+            Some(m) => {
+                masks.push(m.clone());
+                segmented.push(false);
+            }
+            None => {
+                masks.push(clusters.next().expect("one cluster per object without a mask"));
+                segmented.push(true);
+            }
+        }
+    }
+    // Segmented clusters come largest first, not in capture order: give each cluster the
+    // family (among the mask-less objects' categories) that fits it best.
+    let mut objects = Vec::with_capacity(masks.len());
+    for (k, mask) in masks.iter().enumerate() {
+        let obs = observe(depth, cam, mask, &cfg.fit)?;
+        let fit = if segmented[k] {
+            let mut options: Vec<Family> = capture.objects.iter().zip(&families).filter(|(o, _)| o.mask.is_none()).map(|(_, f)| *f).collect();
+            options.dedup();
+            options.iter().map(|f| fit_family(*f, &obs, &plane, &cfg.fit)).min_by(|a, b| a.loss.total_cmp(&b.loss)).expect("one option")
+        } else {
+            fit_family(families[k], &obs, &plane, &cfg.fit)
+        };
+        objects.push(fit);
+    }
+    Ok(Objects { plane, objects, masks, segmented })
+}
+
+/// The stage-1 loss of a hypothesis (shape parameters `u` in the unit box, placement `sim`) on
+/// `obs`, with the size unit `s0` of the fit (for comparing hypotheses and for tests).
+pub fn score(family: Family, u: &[f64], sim: &Similarity3<f64>, obs: &ObjectObservation, plane: &Plane, cfg: &ObjectConfig, s0: f64) -> f64 {
+    let problem = Problem { family, obs, plane, s0, cfg };
+    let st = State { rotation: sim.rotation, translation: sim.translation, log_scale: sim.scale.ln(), u: [u.first().copied().unwrap_or(0.5), u.get(1).copied().unwrap_or(0.5)] };
+    problem.eval(&st, None)
+}

@@ -1,0 +1,157 @@
+//! The whole pipeline on one capture: stage 0 → stage 1 → reflected rays → stage 2.
+
+use crate::human::{HumanConfig, HumanFit, HumanProblem, HumanState, fit_human};
+use crate::objects::{Objects, Stage1Config, reconstruct_objects};
+use crate::preprocess::{PreprocessConfig, Preprocessed, preprocess};
+use crate::ReconError;
+use irmirror_body::BodyModel;
+use irmirror_body::prior::PosePrior;
+use irmirror_capture::Capture;
+use irmirror_render::reflect::{Normals, ReflectedRays, reflect_camera};
+use irmirror_render::sphere_trace::{SurfaceMethod, TraceParams};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// The ablation switches of the paper's Table 1: each changes one step only.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Ablation {
+    /// Uniform ray draws instead of the edge curriculum.
+    EdgeSampling,
+    /// Gradient projection of the coarse point instead of K = 3 sphere-tracing steps.
+    SphereTracing,
+    /// Raw SDF normals instead of the 3×3 average.
+    Smoothing,
+}
+
+/// All settings of `reconstruct` (the `--config` TOML; every field optional).
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReconConfig {
+    /// Stage 0.
+    pub preprocess: PreprocessConfig,
+    /// Stage 1.
+    pub objects: Stage1Config,
+    /// Reflected rays: sphere tracing.
+    pub trace: TraceParams,
+    /// Stage 2.
+    pub human: HumanConfig,
+    /// Ablations applied.
+    pub ablate: Vec<Ablation>,
+}
+
+impl ReconConfig {
+    /// The trace settings and normals after ablations.
+    pub fn rays_settings(&self) -> (TraceParams, Normals) {
+        let mut t = self.trace;
+        if self.ablate.contains(&Ablation::SphereTracing) {
+            t.method = SurfaceMethod::GradientProjection;
+        }
+        let n = if self.ablate.contains(&Ablation::Smoothing) { Normals::Raw } else { Normals::Smoothed };
+        (t, n)
+    }
+    /// The stage-2 settings after ablations.
+    pub fn human_settings(&self) -> HumanConfig {
+        let mut h = self.human.clone();
+        if self.ablate.contains(&Ablation::EdgeSampling) {
+            h.edge_sampling = false;
+        }
+        h
+    }
+}
+
+/// Everything the pipeline produced.
+pub struct Reconstruction {
+    /// Stage 0.
+    pub pre: Preprocessed,
+    /// Stage 1.
+    pub objects: Objects,
+    /// Reflected rays of the thermal pixels on the fitted objects (depth frame).
+    pub rays: ReflectedRays<f64>,
+    /// Stage 2 summary.
+    pub human: HumanFit,
+    /// Stage-2 states, same order as `human.hypotheses`.
+    pub states: Vec<HumanState>,
+}
+
+/// Stage reached callbacks (for progress bars).
+pub trait Progress: Sync {
+    /// A stage starts (`total` work units for the bar, 0 for a spinner).
+    fn stage(&self, name: &str, total: u64);
+    /// One unit done.
+    fn tick(&self);
+}
+
+/// No progress output.
+pub struct Quiet;
+impl Progress for Quiet {
+    fn stage(&self, _: &str, _: u64) {}
+    fn tick(&self) {}
+}
+
+/// Reflected rays that see past every object and the support plane: a ray that hits a fitted
+/// object (a bowl's own rim, a neighbouring mug) or the support plane within
+/// [`PLANE_BLOCK_M`] of its origin cannot show the person, whatever their pose, so it is left
+/// out of the fit (its pixel is neither evidence for nor against a body).
+pub fn unblocked(rays: &ReflectedRays<f64>, objects: &[irmirror_render::sdf::PlacedSdf], plane: &crate::plane::Plane, trace: &TraceParams) -> ReflectedRays<f64> {
+    use rayon::prelude::*;
+    let keep: Vec<bool> = (0..rays.len())
+        .into_par_iter()
+        .map(|i| {
+            // Leave the surface by twice the tracer's coarse tolerance (which is relative to the
+            // object's size) before testing, or the ray re-finds the point it leaves.
+            let own = &objects[rays.object[i] as usize];
+            let tol = trace.coarse_tol_rel * own.sdf.bounding_radius() * own.depth_from_object.scale;
+            let o = rays.origin[i] + rays.normal[i] * (2.0 * tol + 2e-4);
+            let ray = irmirror_geom::Ray { origin: o, dir: rays.dir[i] };
+            if objects.iter().any(|obj| irmirror_render::sphere_trace::trace(obj, &ray, trace).is_some()) {
+                return false;
+            }
+            if plane.found {
+                let n = plane.n();
+                let denom = n.dot(&ray.dir);
+                if denom < -1e-9 {
+                    let t = (plane.offset_m - n.dot(&o)) / denom;
+                    if t > 0.0 && t < PLANE_BLOCK_M {
+                        return false;
+                    }
+                }
+            }
+            true
+        })
+        .collect();
+    let mut out = ReflectedRays { width: rays.width, height: rays.height, ..Default::default() };
+    for (i, k) in keep.iter().enumerate() {
+        if *k {
+            out.pixel.push(rays.pixel[i]);
+            out.object.push(rays.object[i]);
+            out.origin.push(rays.origin[i]);
+            out.dir.push(rays.dir[i]);
+            out.normal.push(rays.normal[i]);
+        }
+    }
+    out
+}
+
+/// Reach of the support plane as an occluder, metres (tables are finite; the floor under a car
+/// is not, but nobody stands under it).
+pub const PLANE_BLOCK_M: f64 = 0.6;
+
+/// Runs stages 0–2.
+pub fn reconstruct(capture: &Capture, model: &BodyModel, prior: &PosePrior, cfg: &ReconConfig, seed: u64, progress: &dyn Progress) -> Result<Reconstruction, ReconError> {
+    progress.stage("thermal preprocessing", 0);
+    let pre = preprocess(capture, &cfg.preprocess)?;
+    progress.stage("object fit", 0);
+    let objects = reconstruct_objects(capture, &cfg.objects, seed)?;
+    progress.stage("reflected rays", 0);
+    let (trace, normals) = cfg.rays_settings();
+    let placed = objects.placed();
+    let all_rays = reflect_camera(&capture.thermal_camera, &capture.depth_from_thermal, &placed, &trace, normals);
+    let rays = unblocked(&all_rays, &placed, &objects.plane, &trace);
+    let centre = placed.iter().fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation) / placed.len().max(1) as f64;
+    let problem = HumanProblem { model, prior, rays: &rays, mask: &pre.mask, up: objects.plane.n(), objects_centre: centre };
+    let hcfg = cfg.human_settings();
+    progress.stage("human fit", hcfg.inits as u64);
+    let (human, states) = fit_human(&problem, &hcfg, seed, &|_| progress.tick())?;
+    Ok(Reconstruction { pre, objects, rays, human, states })
+}
