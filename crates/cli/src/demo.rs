@@ -27,7 +27,6 @@ struct RunRecord<'a> {
     body_asset: String,
     config: &'a ReconConfig,
     scene: &'a str,
-    seconds: f64,
 }
 
 /// Figures of the demo's evaluation against the simulator's truth.
@@ -123,11 +122,10 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
         body_asset: format!("built-in, rank {}, {} influences", model.rank(), model.asset.influences),
         config: &cfg,
         scene: "capture/truth/scene.toml",
-        seconds,
     };
     write_text(&stage.path("run.toml"), &toml::to_string(&record)?)?;
     let objects: Vec<&str> = capture.objects.iter().map(|o| o.category.as_str()).collect();
-    let html = report_html(seed, &scene_text, &sim.report, &objects, &sim, &eval, &crate::result::report_section("", &capture, &rec), seconds);
+    let html = report_html(seed, &scene_text, &sim.report, &objects, &sim, &eval, &crate::result::report_section("", &capture, &rec));
     write_text(&stage.path("report.html"), &html)?;
     bars.finish();
     let dir = stage.commit()?;
@@ -152,7 +150,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     Ok(())
 }
 
-fn report_html(seed: u64, scene: &str, r: &irmirror_sim::SimReport, objects: &[&str], sim: &irmirror_sim::Simulation, e: &Evaluation, recon: &str, seconds: f64) -> String {
+fn report_html(seed: u64, scene: &str, r: &irmirror_sim::SimReport, objects: &[&str], sim: &irmirror_sim::Simulation, e: &Evaluation, recon: &str) -> String {
     let p = &sim.scene.person;
     let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     format!(
@@ -161,8 +159,7 @@ fn report_html(seed: u64, scene: &str, r: &irmirror_sim::SimReport, objects: &[&
 <p>A simulated tabletop capture: {objs} on a table, seen by a depth camera and a 160×120 thermal
 (LWIR) camera. A person stands behind the cameras, outside both views; the glazed surfaces
 reflect their body heat. irmirror fitted the objects to the depth image and the person to the
-reflection, from the capture alone; the simulator's truth is used only for the evaluation below.
-Run time {seconds:.1} s.</p>
+reflection, from the capture alone; the simulator's truth is used only for the evaluation below.</p>
 <h2>Evaluation against the truth</h2><table>
 <tr><th>root (pelvis) position error</th><td>{root:.2} m (person {dist:.2} m from the camera)</td></tr>
 <tr><th>2-D keypoints, third camera (normalised)</th><td>{k2}</td></tr>

@@ -134,7 +134,7 @@ pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, 
             }
             let params = serde_json::json!({"frame": "depth camera (OpenCV axes), metres", "support_plane": objs.plane, "objects": objs.objects, "segmented": objs.segmented});
             write_text(&st.path("objects.json"), &serde_json::to_string_pretty(&params)?)?;
-            write_record(&st, capture_dir, "objects", &cfg, seed, serde_json::json!({"seconds": t0.elapsed().as_secs_f64()}))?;
+            write_record(&st, capture_dir, "objects", &cfg, seed, serde_json::json!({}))?;
             let dir = st.commit()?;
             for (k, o) in objs.objects.iter().enumerate() {
                 let t = o.depth_from_object.translation;
@@ -159,7 +159,7 @@ pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, 
             );
             write_text(&st.path("report.html"), &html)?;
             let secs = t0.elapsed().as_secs_f64();
-            write_record(&st, capture_dir, "full", &cfg, seed, serde_json::json!({"seconds": secs}))?;
+            write_record(&st, capture_dir, "full", &cfg, seed, serde_json::json!({}))?;
             let dir = st.commit()?;
             print_summary(&rec);
             println!("wrote {} in {secs:.1} s (open report.html)", dir.display());

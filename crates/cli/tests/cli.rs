@@ -41,7 +41,11 @@ fn demo_is_deterministic_and_complete() {
     }
     let (fa, fb, fc) = (read_tree(&a), read_tree(&b), read_tree(&c));
     let names: Vec<&str> = fa.iter().map(|f| f.0.as_str()).collect();
-    for f in ["person_truth.glb", "person_truth.obj", "person_truth.ply", "person_preview.png", "report.html", "run.toml", "capture/capture.toml", "capture/thermal.png"] {
+    for f in [
+        "body.ply", "body.obj", "body.glb", "params.json", "eval.json", "overlay.png", "loss_curve.png", "views/third_camera.png",
+        "views/overview.png", "objects/object_0.ply", "objects/object_0.glb", "hypotheses/body_0.ply", "reflection_mask.png",
+        "person_truth.glb", "person_truth.obj", "person_truth.ply", "report.html", "run.toml", "capture/capture.toml", "capture/thermal.png",
+    ] {
         assert!(names.contains(&f), "missing {f} in {names:?}");
     }
     assert_eq!(fa, fb, "same seed, different output");
@@ -169,7 +173,7 @@ fn simulate_writes_a_loadable_deterministic_capture() {
 }
 
 #[test]
-fn reconstruct_stage_0_writes_the_mask_and_refuses_what_is_not_built() {
+fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
     let cap = tmp("rec-capture");
     let o = irmirror(&["simulate", "--preset", "car", "--out", cap.to_str().unwrap(), "--seed", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -181,16 +185,31 @@ fn reconstruct_stage_0_writes_the_mask_and_refuses_what_is_not_built() {
         assert!(out.join(f).exists(), "missing {f}");
     }
     assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
-    // Stages not built yet: a clear error, no output.
+    // The full pipeline: meshes, parameters, images, report; the input untouched.
     let out2 = tmp("rec-out2");
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap()]);
-    assert!(!o.status.success() && stderr(&o).contains("only `--stage preprocess`"));
-    assert!(!out2.exists());
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap(), "--seed", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["body.ply", "body.obj", "body.glb", "params.json", "overlay.png", "loss_curve.png", "report.html", "run.toml", "objects/object_0.ply", "views/overview.png"] {
+        assert!(out2.join(f).exists(), "missing {f}");
+    }
+    let params: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out2.join("params.json")).unwrap()).unwrap();
+    assert!(!params["human"]["hypotheses"].as_array().unwrap().is_empty());
+    assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
+    // Stage 1 alone, and an unknown ablation is refused by the parser.
+    let out3 = tmp("rec-out3");
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out3.to_str().unwrap(), "--stage", "objects"]);
+    assert!(o.status.success() && out3.join("objects/object_0.ply").exists() && out3.join("objects.json").exists(), "{}", stderr(&o));
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out3.to_str().unwrap(), "--ablate", "everything"]);
+    assert!(!o.status.success() && stderr(&o).contains("--ablate"));
+    std::fs::remove_dir_all(&out2).ok();
+    std::fs::remove_dir_all(&out3).ok();
     // A capture whose thermal frame equals its background: no reflection, clear error, no output.
     std::fs::copy(cap.join("thermal_background.png"), cap.join("thermal.png")).unwrap();
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap(), "--stage", "preprocess"]);
-    assert!(!o.status.success() && stderr(&o).contains("no reflection"), "{}", stderr(&o));
-    assert!(!out2.exists());
+    for stage in ["preprocess", "full"] {
+        let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap(), "--stage", stage]);
+        assert!(!o.status.success() && stderr(&o).contains("no reflection"), "{}", stderr(&o));
+        assert!(!out2.exists());
+    }
     for d in [cap, out] {
         std::fs::remove_dir_all(d).ok();
     }
