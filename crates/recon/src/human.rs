@@ -169,7 +169,7 @@ pub fn edge_distance(mask: &Image<bool>) -> Image<f64> {
             }
         }
     };
-    let (a, b) = (1.0, 1.4142);
+    let (a, b) = (1.0, std::f64::consts::SQRT_2);
     pass(&mut d, (0..w).collect(), (0..h).collect(), [(-1, 0, a), (0, -1, a), (-1, -1, b), (1, -1, b)]);
     pass(&mut d, (0..w).rev().collect(), (0..h).rev().collect(), [(1, 0, a), (0, 1, a), (1, 1, b), (-1, 1, b)]);
     Image { width: mask.width, height: mask.height, data: d }
@@ -414,7 +414,8 @@ impl HumanProblem<'_> {
 pub fn fit_human(problem: &HumanProblem<'_>, cfg: &HumanConfig, seed: u64, progress: &(dyn Fn(usize) + Sync)) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
     let inits = problem.initial_states(cfg, seed)?;
     let edge_dist = edge_distance(problem.mask);
-    let results: Vec<Result<Option<(usize, HumanState, Vec<f64>)>, ReconError>> = inits
+    type Run = Option<(usize, HumanState, Vec<f64>)>;
+    let results: Vec<Result<Run, ReconError>> = inits
         .par_iter()
         .enumerate()
         .map(|(k, init)| {
