@@ -201,6 +201,13 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
     assert!(o.status.success() && out3.join("objects/object_0.ply").exists() && out3.join("objects.json").exists(), "{}", stderr(&o));
     let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out3.to_str().unwrap(), "--ablate", "everything"]);
     assert!(!o.status.success() && stderr(&o).contains("--ablate"));
+    // A config with an unknown setting: a clear error naming it, no output.
+    let bad = tmp("rec-bad.toml");
+    std::fs::write(&bad, "[human]\ninits = 4\nbogus = 1\n").unwrap();
+    let out4 = tmp("rec-out4");
+    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out4.to_str().unwrap(), "--config", bad.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("bogus") && !out4.exists(), "{}", stderr(&o));
+    std::fs::remove_file(&bad).ok();
     std::fs::remove_dir_all(&out2).ok();
     std::fs::remove_dir_all(&out3).ok();
     // A capture whose thermal frame equals its background: no reflection, clear error, no output.

@@ -192,23 +192,6 @@ fn soft_iou(v: &[f64], t: &[f64], d: &mut Vec<f64>) -> (f64, f64) {
     (1.0 - inter / union, inter / union)
 }
 
-fn subset(rays: &ReflectedRays<f64>, idx: &[usize], out: &mut ReflectedRays<f64>) {
-    out.width = rays.width;
-    out.height = rays.height;
-    out.pixel.clear();
-    out.object.clear();
-    out.origin.clear();
-    out.dir.clear();
-    out.normal.clear();
-    for &i in idx {
-        out.pixel.push(rays.pixel[i]);
-        out.object.push(rays.object[i]);
-        out.origin.push(rays.origin[i]);
-        out.dir.push(rays.dir[i]);
-        out.normal.push(rays.normal[i]);
-    }
-}
-
 /// A rotation taking Anny's +Z (up) to `up` and Anny's front (−Y) towards `facing` (projected
 /// onto the plane).
 pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> {
@@ -268,19 +251,72 @@ impl HumanProblem<'_> {
         Ok(Pose { rotations, translation: st.translation })
     }
 
-    /// Loss of a state on all rays at σ (and soft IoU).
-    pub fn full_loss(&self, st: &HumanState, sigma_m2: f64, w_prior: f64, w_upright: f64) -> Result<(f64, f64), ReconError> {
+    /// Buffers reused across steps (allocation-free after the first step).
+    pub fn scratch(&self) -> Result<Scratch, ReconError> {
         let shaped = self.model.shaped::<f64>(&vec![0.0; self.model.rank()]).map_err(|e| ReconError::Prior(e.to_string()))?;
-        let posed = self.model.pose(&shaped, &self.pose(st)?).map_err(|e| ReconError::Prior(e.to_string()))?;
-        let renderer = SoftRenderer::new(&posed.vertices, &self.model.asset.faces);
+        Ok(Scratch {
+            shaped,
+            posed: self.model.posed_buffers(),
+            renderer: None,
+            occ_grad: OccupancyGrad::default(),
+            body_grad: BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] },
+            d_value: Vec::new(),
+        })
+    }
+
+    /// The stage-2 loss on `rays` (targets `target`, 0/1 per ray) at blur `sigma_m2`, with the
+    /// body at root translation `t`, root rotation `exp(ω) base` and pose latent `latent`, and
+    /// the soft IoU. With `grad` (length 6 + latent), writes `∂L/∂(t, ω, latent)` there.
+    pub fn loss_grad(
+        &self,
+        ws: &mut Scratch,
+        t: &Vector3<f64>,
+        omega: &Vector3<f64>,
+        base: &Matrix3<f64>,
+        latent: &[f64],
+        rays: &ReflectedRays<f64>,
+        target: &[f64],
+        sigma_m2: f64,
+        cfg: &HumanConfig,
+        grad: Option<&mut [f64]>,
+    ) -> Result<(f64, f64), ReconError> {
+        let err = |e: String| ReconError::Prior(e);
+        let st = HumanState { translation: *t, rotation: axis_angle_to_matrix(omega) * base, latent: latent.to_vec() };
+        let pose = self.pose(&st)?;
+        self.model.pose_into(&ws.shaped, &pose, &mut ws.posed).map_err(|e| err(e.to_string()))?;
+        let r = ws.renderer.get_or_insert_with(|| SoftRenderer::new(&ws.posed.vertices, &self.model.asset.faces));
+        r.set_vertices(&ws.posed.vertices);
         let params = OccupancyParams { sigma_m2, ..OccupancyParams::default() };
-        let occ = renderer.forward(self.rays, &params, Culling::Bvh);
-        let target: Vec<f64> = self.rays.pixel.iter().map(|&p| f64::from(u8::from(self.mask.data[p as usize]))).collect();
-        let mut d = Vec::new();
-        let (l, iou) = soft_iou(&occ.value, &target, &mut d);
-        let prior: f64 = st.latent.iter().map(|x| x * x).sum();
-        let upright = 1.0 - (st.rotation * Vector3::z()).dot(&self.up.normalize());
-        Ok((l + w_prior * prior + w_upright * upright, iou))
+        let occ = r.forward(rays, &params, Culling::Bvh);
+        let (l_iou, iou) = soft_iou(&occ.value, target, &mut ws.d_value);
+        let prior: f64 = latent.iter().map(|x| x * x).sum();
+        let up = self.up.normalize();
+        let loss = l_iou + cfg.w_prior * prior + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
+        let Some(g) = grad else { return Ok((loss, iou)) };
+        r.backward(rays, &occ, &ws.d_value, &params, Culling::Bvh, &mut ws.occ_grad);
+        let bg = &mut ws.body_grad;
+        self.model.backward(&ws.shaped, &pose, &mut ws.posed, OutputGrads { vertices: Some(&ws.occ_grad.vertices), ..Default::default() }, bg);
+        // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
+        bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
+        let d_omega = axis_angle_to_matrix_vjp(omega, &(bg.rotations[0] * base.transpose()));
+        let d_lat = self.prior.decode_vjp(latent, &bg.rotations).map_err(|e| err(e.to_string()))?;
+        g[..3].copy_from_slice(bg.translation.as_slice());
+        g[3..6].copy_from_slice(d_omega.as_slice());
+        for (k, (gk, dk)) in g[6..].iter_mut().zip(&d_lat).enumerate() {
+            *gk = dk + cfg.w_prior * 2.0 * latent[k];
+        }
+        Ok((loss, iou))
+    }
+
+    /// Targets of all rays (1 in the mask).
+    pub fn targets(&self) -> Vec<f64> {
+        self.rays.pixel.iter().map(|&p| f64::from(u8::from(self.mask.data[p as usize]))).collect()
+    }
+
+    /// Loss of a state on all rays at the final σ, and its soft IoU.
+    pub fn full_loss(&self, st: &HumanState, cfg: &HumanConfig) -> Result<(f64, f64), ReconError> {
+        let mut ws = self.scratch()?;
+        self.loss_grad(&mut ws, &st.translation, &Vector3::zeros(), &st.rotation, &st.latent, self.rays, &self.targets(), cfg.sigma_m2[1], cfg, None)
     }
 
     /// Initial states (deterministic for `seed`).
@@ -315,10 +351,7 @@ impl HumanProblem<'_> {
     /// Runs one hypothesis from `init`; returns the final state and the per-step loss, or `None`
     /// if it diverged.
     pub fn run(&self, init: &HumanState, cfg: &HumanConfig, edge_dist: &Image<f64>, seed: u64) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
-        let err = |e: String| ReconError::Prior(e);
-        let model = self.model;
-        let shaped = model.shaped::<f64>(&vec![0.0; model.rank()]).map_err(|e| err(e.to_string()))?;
-        let mut posed = model.posed_buffers::<f64>();
+        let mut ws = self.scratch()?;
         let mut st = init.clone();
         let base = st.rotation;
         let mut omega = Vector3::zeros();
@@ -327,13 +360,10 @@ impl HumanProblem<'_> {
         let mut lr = vec![cfg.lr_translation; 3];
         lr.extend([cfg.lr_rotation; 3]);
         lr.extend(vec![cfg.lr_latent; n_lat]);
-        let mut renderer: Option<SoftRenderer<f64>> = None;
         let mut rng = irmirror_geom::rng::seeded(seed, 31);
-        let target_all: Vec<f64> = self.rays.pixel.iter().map(|&p| f64::from(u8::from(self.mask.data[p as usize]))).collect();
+        let target_all = self.targets();
         let e_all: Vec<f64> = self.rays.pixel.iter().map(|&p| edge_dist.data[p as usize]).collect();
-        let (mut sub, mut target, mut d_value, mut keys) = (ReflectedRays::default(), Vec::new(), Vec::new(), Vec::<(f64, usize)>::new());
-        let mut og = OccupancyGrad::default();
-        let mut bg = BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] };
+        let (mut sub, mut target, mut keys, mut idx) = (ReflectedRays::default(), Vec::new(), Vec::<(f64, usize)>::new(), Vec::new());
         let mut curve = Vec::with_capacity(cfg.iterations);
         let (mut g, mut step) = (vec![0.0; 6 + n_lat], vec![0.0; 6 + n_lat]);
         let iters = cfg.iterations.max(1);
@@ -358,44 +388,17 @@ impl HumanProblem<'_> {
                 keys.truncate(m);
             }
             keys.sort_by_key(|k| k.1);
-            let idx: Vec<usize> = keys.iter().map(|k| k.1).collect();
-            subset(self.rays, &idx, &mut sub);
+            idx.clear();
+            idx.extend(keys.iter().map(|k| k.1));
+            self.rays.select_into(&idx, &mut sub);
             target.clear();
             target.extend(idx.iter().map(|&i| target_all[i]));
 
-            // Forward.
-            st.rotation = axis_angle_to_matrix(&omega) * base;
-            let pose = self.pose(&st)?;
-            model.pose_into(&shaped, &pose, &mut posed).map_err(|e| err(e.to_string()))?;
-            let r = renderer.get_or_insert_with(|| SoftRenderer::new(&posed.vertices, &model.asset.faces));
-            r.set_vertices(&posed.vertices);
-            let params = OccupancyParams { sigma_m2: sigma, ..OccupancyParams::default() };
-            let occ = r.forward(&sub, &params, Culling::Bvh);
-            let (l_iou, _) = soft_iou(&occ.value, &target, &mut d_value);
-            let prior: f64 = st.latent.iter().map(|x| x * x).sum();
-            let up = self.up.normalize();
-            let upright = 1.0 - (st.rotation * Vector3::z()).dot(&up);
-            let loss = l_iou + cfg.w_prior * prior + cfg.w_upright * upright;
-            if !loss.is_finite() {
+            let (loss, _) = self.loss_grad(&mut ws, &st.translation, &omega, &base, &st.latent, &sub, &target, sigma, cfg, Some(&mut g))?;
+            if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
                 return Ok(None);
             }
             curve.push(loss);
-
-            // Backward.
-            r.backward(&sub, &occ, &d_value, &params, Culling::Bvh, &mut og);
-            model.backward(&shaped, &pose, &mut posed, OutputGrads { vertices: Some(&og.vertices), ..Default::default() }, &mut bg);
-            // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
-            bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
-            let d_omega = axis_angle_to_matrix_vjp(&omega, &(bg.rotations[0] * base.transpose()));
-            let d_lat = self.prior.decode_vjp(&st.latent, &bg.rotations).map_err(|e| err(e.to_string()))?;
-            g[..3].copy_from_slice(bg.translation.as_slice());
-            g[3..6].copy_from_slice(d_omega.as_slice());
-            for k in 0..n_lat {
-                g[6 + k] = d_lat[k] + cfg.w_prior * 2.0 * st.latent[k];
-            }
-            if g.iter().any(|x| !x.is_finite()) {
-                return Ok(None);
-            }
             adam.step(&g, &lr, &mut step);
             // Learning rates decay by cosine to 10 %.
             let decay = 0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos());
@@ -408,6 +411,16 @@ impl HumanProblem<'_> {
         st.rotation = axis_angle_to_matrix(&omega) * base;
         Ok(Some((st, curve)))
     }
+}
+
+/// Buffers of [`HumanProblem::loss_grad`], reused across steps.
+pub struct Scratch {
+    shaped: irmirror_body::ShapedBody<f64>,
+    posed: irmirror_body::PosedBody<f64>,
+    renderer: Option<SoftRenderer<f64>>,
+    occ_grad: OccupancyGrad<f64>,
+    body_grad: BodyGrad<f64>,
+    d_value: Vec<f64>,
 }
 
 /// Fits the person: every initialisation in parallel, best first, distinct top-k.
@@ -438,7 +451,7 @@ pub fn fit_human(problem: &HumanProblem<'_>, cfg: &HumanConfig, seed: u64, progr
     let mut scored: Vec<(Hypothesis, HumanState)> = done
         .into_par_iter()
         .map(|(k, st, curve)| {
-            let (loss, iou) = problem.full_loss(&st, cfg.sigma_m2[1], cfg.w_prior, cfg.w_upright)?;
+            let (loss, iou) = problem.full_loss(&st, cfg)?;
             let h = Hypothesis {
                 init: k,
                 translation_m: st.translation.into(),

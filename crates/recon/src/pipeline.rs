@@ -82,13 +82,6 @@ pub trait Progress: Sync {
     fn tick(&self);
 }
 
-/// No progress output.
-pub struct Quiet;
-impl Progress for Quiet {
-    fn stage(&self, _: &str, _: u64) {}
-    fn tick(&self) {}
-}
-
 /// Reflected rays that see past every object and the support plane: a ray that hits a fitted
 /// object (a bowl's own rim, a neighbouring mug) or the support plane within
 /// [`PLANE_BLOCK_M`] of its origin cannot show the person, whatever their pose, so it is left
@@ -120,16 +113,9 @@ pub fn unblocked(rays: &ReflectedRays<f64>, objects: &[irmirror_render::sdf::Pla
             true
         })
         .collect();
-    let mut out = ReflectedRays { width: rays.width, height: rays.height, ..Default::default() };
-    for (i, k) in keep.iter().enumerate() {
-        if *k {
-            out.pixel.push(rays.pixel[i]);
-            out.object.push(rays.object[i]);
-            out.origin.push(rays.origin[i]);
-            out.dir.push(rays.dir[i]);
-            out.normal.push(rays.normal[i]);
-        }
-    }
+    let kept: Vec<usize> = keep.iter().enumerate().filter_map(|(i, k)| k.then_some(i)).collect();
+    let mut out = ReflectedRays::default();
+    rays.select_into(&kept, &mut out);
     out
 }
 

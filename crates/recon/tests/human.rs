@@ -5,6 +5,8 @@ use irmirror_body::prior::PosePrior;
 use irmirror_sim::presets::{Preset, preset_scene};
 use irmirror_sim::scene::{SceneFile, ThermalPreset};
 use irmirror_sim::simulate;
+use irmirror_render::reflect::ReflectedRays;
+use nalgebra::Vector3;
 use std::sync::OnceLock;
 
 fn model() -> &'static BodyModel {
@@ -23,20 +25,31 @@ fn scene(seed: u64, is_car: bool) -> SceneFile {
     preset_scene(model(), p, t, seed).unwrap()
 }
 
-/// Stage 2 alone on a car capture (true objects and true mask, so stage 0–1 errors do not
-/// enter): from the truth moved by 20 cm and turned by 20°, the fit lowers the loss, and the
-/// rays that see past the objects reproduce the true mask with the true body mesh exactly.
-#[test]
-fn stage2_improves_a_perturbed_start_on_a_car_capture() {
-    use irmirror_recon::human::*;
-    use nalgebra::Vector3;
-    let seed = 1;
+/// A car capture with the true objects' unoccluded reflected rays (stage 0–1 errors kept out).
+fn car_capture(seed: u64) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
     let sc = scene(seed, true);
     let sim = simulate(model(), &sc, seed).unwrap();
     let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc.objects.iter().zip(&sim.object_poses).map(|(o, p)| irmirror_render::sdf::PlacedSdf { sdf: o.shape.sdf(), depth_from_object: *p }).collect();
     let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
     let all = irmirror_render::reflect::reflect_camera(&sc.thermal_camera.intrinsics, &dft, &objs, &Default::default(), irmirror_render::reflect::Normals::Raw);
     let rays = irmirror_recon::pipeline::unblocked(&all, &objs, &irmirror_recon::plane::Plane::camera_up(), &Default::default());
+    (sc, sim, rays)
+}
+
+/// The true root rotation (Anny → depth) and the body's up, depth frame.
+fn true_root(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> (nalgebra::Matrix3<f64>, Vector3<f64>) {
+    let r = sim.body.depth_from_anny.rotation;
+    (r * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0])), r * Vector3::z())
+}
+
+/// Stage 2 alone on a car capture (true objects and true mask, so stage 0–1 errors do not
+/// enter): from the truth moved by 20 cm and turned by 20°, the fit lowers the loss, and the
+/// rays that see past the objects reproduce the true mask with the true body mesh exactly.
+#[test]
+fn stage2_improves_a_perturbed_start_on_a_car_capture() {
+    use irmirror_recon::human::*;
+    let seed = 1;
+    let (sc, sim, rays) = car_capture(seed);
     // The simulator's own body mesh through these rays gives the truth mask exactly.
     let v: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
     let bvh = irmirror_render::bvh::Bvh::build(&v, &sim.body.mesh.triangles);
@@ -45,8 +58,7 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
 
     let root = sim.body.joints[0];
     let rv = &sc.person.rotvec_rad;
-    let r0 = sim.body.depth_from_anny.rotation * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(rv[0]));
-    let up = sim.body.depth_from_anny.rotation * Vector3::z();
+    let (r0, up) = true_root(&sc, &sim);
     let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation };
     let start = HumanState {
         translation: root + Vector3::new(0.2, 0.0, 0.0),
@@ -54,9 +66,9 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
         latent: prior().encode(rv).unwrap(),
     };
     let cfg = HumanConfig::default();
-    let (l0, iou0) = problem.full_loss(&start, cfg.sigma_m2[1], cfg.w_prior, cfg.w_upright).unwrap();
+    let (l0, iou0) = problem.full_loss(&start, &cfg).unwrap();
     let (end, curve) = problem.run(&start, &cfg, &edge_distance(&sim.reflection_mask), 7).unwrap().expect("no divergence");
-    let (l1, iou1) = problem.full_loss(&end, cfg.sigma_m2[1], cfg.w_prior, cfg.w_upright).unwrap();
+    let (l1, iou1) = problem.full_loss(&end, &cfg).unwrap();
     let err = (end.translation - root).norm();
     eprintln!("loss {l0:.3} → {l1:.3}, soft IoU {iou0:.3} → {iou1:.3}, root error 0.200 → {err:.3} m, {} steps", curve.len());
     assert!(l1 < l0 - 0.05, "loss {l0} → {l1}");
@@ -72,4 +84,53 @@ fn a_mask_off_the_objects_is_a_clear_error() {
     let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &mask, up: nalgebra::Vector3::y(), objects_centre: nalgebra::Vector3::zeros() };
     let e = fit_human(&problem, &HumanConfig::default(), 0, &|_| {}).unwrap_err();
     assert!(matches!(e, irmirror_recon::ReconError::NoMaskRays), "{e}");
+}
+
+/// `HumanProblem::loss_grad` (occupancy → body → root rotation exp(ω)B and pose prior, plus the
+/// latent and upright priors) against central differences, f64, all rays, at ω ≠ 0.
+#[test]
+fn stage2_gradient_matches_finite_differences() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let (r0, up) = true_root(&sc, &sim);
+    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation };
+    let cfg = HumanConfig::default();
+    let sigma = 4e-4;
+    let target = problem.targets();
+    let t = sim.body.joints[0] + Vector3::new(0.04, -0.02, 0.03);
+    let omega = Vector3::new(0.05, -0.03, 0.04);
+    let mut latent = prior().encode(&sc.person.rotvec_rad).unwrap();
+    latent[0] += 0.3;
+    let mut ws = problem.scratch().unwrap();
+    let mut g = vec![0.0; 6 + latent.len()];
+    let (l0, _) = problem.loss_grad(&mut ws, &t, &omega, &r0, &latent, &rays, &target, sigma, &cfg, Some(&mut g)).unwrap();
+    assert!(l0 > 0.05 && l0 < 0.99, "loss {l0} is not in the informative range");
+    let mut f = |t: &Vector3<f64>, w: &Vector3<f64>, z: &[f64]| problem.loss_grad(&mut ws, t, w, &r0, z, &rays, &target, sigma, &cfg, None).unwrap().0;
+    let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let mut worst = 0.0f64;
+    for k in 0..6 + 6 {
+        let h = if k < 6 { 1e-5 } else { 1e-4 };
+        let (mut tp, mut tm, mut wp, mut wm, mut zp, mut zm) = (t, t, omega, omega, latent.clone(), latent.clone());
+        let idx = if k < 6 { k } else { 6 + (k - 6) * 5 };
+        match idx {
+            0..3 => {
+                tp[idx] += h;
+                tm[idx] -= h;
+            }
+            3..6 => {
+                wp[idx - 3] += h;
+                wm[idx - 3] -= h;
+            }
+            _ => {
+                zp[idx - 6] += h;
+                zm[idx - 6] -= h;
+            }
+        }
+        let fd = (f(&tp, &wp, &zp) - f(&tm, &wm, &zm)) / (2.0 * h);
+        let diff = (fd - g[idx]).abs();
+        eprintln!("param {idx:2}: analytic {:+.6e}, central difference {fd:+.6e}", g[idx]);
+        worst = worst.max(diff / gmax);
+    }
+    assert!(gmax > 1e-3, "gradient vanishes: {gmax}");
+    assert!(worst < 2e-3, "worst |fd − analytic| / max |g| = {worst:.2e}");
 }

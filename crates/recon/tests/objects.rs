@@ -60,3 +60,38 @@ fn tabletop_objects_fit_the_truth() {
     // Measured (4 seeds): ≤ 5.8 mm, ≤ 0.5°, ≤ 7.6 % (mugs trade proportions against scale).
     assert!(worst.0 < 0.012 && worst.1 < 2.0 && worst.2 < 12.0, "worst errors {worst:?}");
 }
+
+/// Without masks the objects are found by segmentation above the support plane and still fit;
+/// an unknown category, or no support plane to segment on, is a clear error.
+#[test]
+fn segmentation_and_bad_objects() {
+    use irmirror_recon::ReconError;
+    let seed = 0;
+    let sc = scene(seed);
+    let (dir, truth) = write("seg", &sc, seed);
+    let cap = Capture::load(&dir).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+
+    let mut no_masks = cap.clone();
+    no_masks.objects.iter_mut().for_each(|o| o.mask = None);
+    let objs = reconstruct_objects(&no_masks, &Stage1Config::default(), seed).unwrap();
+    assert_eq!(objs.objects.len(), truth.len());
+    assert!(objs.segmented.iter().all(|&s| s));
+    for (o, k) in objs.objects.iter().zip(0..) {
+        // Clusters come largest first: match each fit to the nearest true object.
+        let nearest = truth.iter().map(|t| (o.depth_from_object.translation - t.translation).norm()).fold(f64::MAX, f64::min);
+        eprintln!("segmented object {k}: {:?}, {:.1} mm from the nearest true object", o.shape, nearest * 1e3);
+        assert!(nearest < 0.015, "segmented object {k} is {nearest} m from every true object");
+    }
+
+    let mut teapot = cap.clone();
+    teapot.objects[0].category = "teapot".into();
+    let e = reconstruct_objects(&teapot, &Stage1Config::default(), seed).unwrap_err();
+    assert!(matches!(e, ReconError::UnknownCategory { .. }) && e.to_string().contains("teapot") && e.to_string().contains("bowl"), "{e}");
+
+    // A fronto-parallel wall only: no support plane, so nothing to segment on.
+    let mut wall = no_masks.clone();
+    wall.depth_m.data.iter_mut().for_each(|z| *z = 1.0);
+    let e = reconstruct_objects(&wall, &Stage1Config::default(), seed).unwrap_err();
+    assert!(matches!(e, ReconError::NoSupportPlane), "{e}");
+}

@@ -54,6 +54,25 @@ impl<T: Real> ReflectedRays<T> {
     pub fn is_empty(&self) -> bool {
         self.pixel.is_empty()
     }
+
+    /// The rays at `indices` (in that order) into `out`, reusing its buffers.
+    pub fn select_into(&self, indices: &[usize], out: &mut ReflectedRays<T>) {
+        out.width = self.width;
+        out.height = self.height;
+        out.pixel.clear();
+        out.object.clear();
+        out.origin.clear();
+        out.dir.clear();
+        out.normal.clear();
+        for &i in indices {
+            out.pixel.push(self.pixel[i]);
+            out.object.push(self.object[i]);
+            out.origin.push(self.origin[i]);
+            out.dir.push(self.dir[i]);
+            out.normal.push(self.normal[i]);
+        }
+    }
+
     /// Converts the scalar type.
     pub fn cast<U: Real>(&self) -> ReflectedRays<U> {
         let c = |v: &Vec<Vector3<T>>| v.iter().map(|x| x.map(|a| U::of(a.to_f64()))).collect();
