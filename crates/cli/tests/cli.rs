@@ -221,3 +221,36 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         std::fs::remove_dir_all(d).ok();
     }
 }
+
+#[test]
+fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
+    let dir = tmp("train-sdf");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("mug.safetensors");
+    let o = irmirror(&["train-sdf", "--category", "mug", "--out", out.to_str().unwrap(), "--shapes", "2", "--steps", "10", "--samples", "500", "--held-out", "0", "--width", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let net = irmirror_sdf::SdfNet::load(&out).unwrap();
+    assert_eq!((net.category, net.width, net.train_latents.len()), (irmirror_sdf::Category::Mug, 32, 2));
+    assert!(net.metadata["command"].starts_with("irmirror train-sdf --category mug"));
+    assert!(out.with_extension("json").is_file());
+    // Bad input: clear message, non-zero exit, nothing written.
+    let meshes = dir.join("meshes");
+    std::fs::create_dir_all(&meshes).unwrap();
+    std::fs::write(meshes.join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+    let bad = dir.join("bad.safetensors");
+    for (args, needle) in [
+        (vec!["--category", "chair"], "unknown object category"),
+        (vec!["--category", "mug", "--meshes", meshes.to_str().unwrap()], "broken.obj"),
+        (vec!["--category", "mug", "--meshes", dir.join("none").to_str().unwrap()], "cannot list"),
+        (vec!["--category", "mug", "--steps", "0"], "--steps"),
+    ] {
+        let mut all = vec!["train-sdf", "--out", bad.to_str().unwrap()];
+        all.extend(args);
+        let o = irmirror(&all);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains(needle), "{needle}: {}", stderr(&o));
+        assert!(!bad.exists());
+    }
+    let o = irmirror(&["train-sdf", "--category", "mug", "--out", dir.join("x.bin").to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains(".safetensors"));
+}

@@ -16,9 +16,28 @@ pub fn isosurface(f: impl Fn(&Vector3<f64>) -> f64 + Sync, lo: Vector3<f64>, hi:
     let n = n.max(2);
     let step = (hi - lo) / n as f64;
     let np = n + 1;
-    let idx = |i: usize, j: usize, k: usize| (k * np + j) * np + i;
     let point = |i: usize, j: usize, k: usize| lo + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z);
     let values: Vec<f64> = (0..np * np * np).into_par_iter().map(|g| f(&point(g % np, (g / np) % np, g / (np * np)))).collect();
+    isosurface_grid(&values, lo, hi, n)
+}
+
+/// The grid points at which [`isosurface_grid`] expects values, x fastest, then y, then z.
+pub fn grid_points(lo: Vector3<f64>, hi: Vector3<f64>, n: usize) -> Vec<Vector3<f64>> {
+    let n = n.max(2);
+    let np = n + 1;
+    let step = (hi - lo) / n as f64;
+    (0..np * np * np).map(|g| lo + Vector3::new((g % np) as f64 * step.x, ((g / np) % np) as f64 * step.y, (g / (np * np)) as f64 * step.z)).collect()
+}
+
+/// Like [`isosurface`], from field values already computed at [`grid_points`] (e.g. by a batched
+/// network evaluation).
+pub fn isosurface_grid(values: &[f64], lo: Vector3<f64>, hi: Vector3<f64>, n: usize) -> TriMesh {
+    let n = n.max(2);
+    let step = (hi - lo) / n as f64;
+    let np = n + 1;
+    assert_eq!(values.len(), np * np * np, "one value per grid point");
+    let idx = |i: usize, j: usize, k: usize| (k * np + j) * np + i;
+    let point = |i: usize, j: usize, k: usize| lo + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z);
     let mut mesh = TriMesh::default();
     let mut edge_vertex: HashMap<(usize, usize), u32> = HashMap::new();
     for k in 0..n {

@@ -28,9 +28,86 @@ pub fn mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
     Some(a.iter().zip(b).map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt()).sum::<f64>() / a.len() as f64)
 }
 
+/// MPJPE after the best similarity alignment of `a` onto `b` (Procrustes with scale, Umeyama),
+/// 3-D points. `None` for fewer than 3 points or degenerate sets.
+pub fn pa_mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
+    if a.len() != b.len() || a.len() < 3 || a.iter().chain(b).any(|p| p.len() != 3) {
+        return None;
+    }
+    let v = |p: &Vec<f64>| nalgebra::Vector3::new(p[0], p[1], p[2]);
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n, b.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n);
+    let mut cov = nalgebra::Matrix3::zeros();
+    let mut var_a = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        let (da, db) = (v(x) - ma, v(y) - mb);
+        cov += db * da.transpose();
+        var_a += da.norm_squared();
+    }
+    if var_a < 1e-18 {
+        return None;
+    }
+    let svd = cov.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let mut d = nalgebra::Matrix3::identity();
+    if (u * vt).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = u * d * vt;
+    let s = (svd.singular_values.component_mul(&d.diagonal())).sum() / var_a;
+    let aligned: Vec<Vec<f64>> = a.iter().map(|x| {
+        let p = mb + r * (v(x) - ma) * s;
+        vec![p.x, p.y, p.z]
+    }).collect();
+    mpjpe(&aligned, b)
+}
+
+/// Mean and half-width of the 95 % confidence interval of the mean (Student t; 0 for one value).
+pub fn mean_ci95(x: &[f64]) -> Option<(f64, f64)> {
+    if x.is_empty() {
+        return None;
+    }
+    let n = x.len();
+    let m = x.iter().sum::<f64>() / n as f64;
+    if n == 1 {
+        return Some((m, 0.0));
+    }
+    let sd = (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+    // Two-sided 97.5 % quantiles of Student's t for 1…30 degrees of freedom, then normal.
+    const T: [f64; 30] = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042];
+    let t = T.get(n - 2).copied().unwrap_or(1.96);
+    Some((m, t * sd / (n as f64).sqrt()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn procrustes_removes_similarity_and_keeps_shape_differences() {
+        let a = pts();
+        let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.5, 1.1);
+        let b: Vec<Vec<f64>> = a.iter().map(|p| {
+            let q = rot * nalgebra::Vector3::new(p[0], p[1], p[2]) * 2.5 + nalgebra::Vector3::new(1.0, -2.0, 0.5);
+            vec![q.x, q.y, q.z]
+        }).collect();
+        assert!(pa_mpjpe(&a, &b).unwrap() < 1e-9);
+        assert!(mpjpe(&a, &b).unwrap() > 0.5);
+        // A genuine shape change survives the alignment.
+        let mut c = b.clone();
+        c[0][0] += 1.0;
+        assert!(pa_mpjpe(&a, &c).unwrap() > 0.05);
+    }
+
+    #[test]
+    fn confidence_interval_of_known_samples() {
+        let (m, h) = mean_ci95(&[1.0, 2.0, 3.0]).unwrap();
+        assert!((m - 2.0).abs() < 1e-12);
+        // sd 1, n 3, t(2) = 4.303.
+        assert!((h - 4.303 / 3f64.sqrt()).abs() < 1e-9);
+        assert_eq!(mean_ci95(&[5.0]), Some((5.0, 0.0)));
+        assert_eq!(mean_ci95(&[]), None);
+    }
 
     fn pts() -> Vec<Vec<f64>> {
         vec![vec![0.0, 0.0, 0.0], vec![1.0, 0.0, 0.0], vec![0.0, 2.0, 0.0], vec![0.0, 0.0, 3.0]]

@@ -129,6 +129,12 @@ pub fn reconstruct(capture: &Capture, model: &BodyModel, prior: &PosePrior, cfg:
     let pre = preprocess(capture, &cfg.preprocess)?;
     progress.stage("object fit", 0);
     let objects = reconstruct_objects(capture, &cfg.objects, seed)?;
+    reconstruct_human(capture, pre, objects, model, prior, cfg, seed, progress)
+}
+
+/// Stage 2 (reflected rays, then the person) on given stage 0–1 results: the evaluation runs
+/// the ablations of one capture from the same objects.
+pub fn reconstruct_human(capture: &Capture, pre: Preprocessed, objects: Objects, model: &BodyModel, prior: &PosePrior, cfg: &ReconConfig, seed: u64, progress: &dyn Progress) -> Result<Reconstruction, ReconError> {
     progress.stage("reflected rays", 0);
     let (trace, normals) = cfg.rays_settings();
     let placed = objects.placed();

@@ -1,0 +1,57 @@
+//! Object shape priors (DESIGN.md §2, issue 4): DeepSDF auto-decoders trained by our own command
+//! on procedural shape families and on user meshes, instead of ShapeNet.
+//!
+//! ```text
+//! families (bowl, mug, car; analytic, documented parameters)
+//!    └─ isosurface ─► watertight unit-sphere mesh ─┐
+//! user meshes (OBJ / PLY / STL) ─ normalise ───────┴─► mesh_sdf: near-surface + uniform samples,
+//!                                                      sign by generalised winding number
+//!    └─► train: auto-decoder (latent ⊕ point → SDF), clamped L1 + latent prior, Adam
+//!    └─► SdfNet (frozen weights): SDF value + gradient per point (the renderer's `Sdf`), batched;
+//!        infer: latent from SDF samples or from surface + free-space points; mesh extraction
+//! ```
+//!
+//! Object frame (shared with `irmirror_render::shapes`): **+Y up**, **+X front** (car nose, mug
+//! handle), the surface inside the unit sphere. Candle stays inside `net`, `train` and `infer`.
+
+pub mod families;
+pub mod mesh_io;
+pub mod mesh_sdf;
+pub mod net;
+pub mod train;
+pub mod infer;
+pub mod quality;
+
+pub use families::{Category, FamilyShape};
+pub use mesh_sdf::{MeshSdf, SdfSamples};
+pub use net::{LatentSdf, SdfNet};
+
+/// Errors of the shape priors.
+#[derive(Debug, thiserror::Error)]
+pub enum SdfError {
+    /// A tensor operation failed.
+    #[error("shape prior: {0}")]
+    Candle(#[from] candle_core::Error),
+    /// A mesh could not be read or is unusable.
+    #[error("mesh {path}: {reason}")]
+    Mesh {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A weights file is not a shape prior of this architecture.
+    #[error("shape prior weights {path}: {reason}")]
+    Weights {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An unknown category name.
+    #[error("unknown object category `{0}` (known: bowl, mug, car)")]
+    UnknownCategory(String),
+    /// Invalid arguments (empty sample set, wrong latent length …).
+    #[error("{0}")]
+    Invalid(String),
+}

@@ -1,0 +1,366 @@
+//! The auto-decoder network (DeepSDF): `f(z, p) → signed distance`, latent `z` concatenated to
+//! the point, one skip connection re-injecting the input at the middle layer, SiLU activations
+//! (smooth normals: the surfaces are mirrors).
+//!
+//! | tensor | shape | meaning |
+//! |---|---|---|
+//! | `l0.weight`, `l0.bias` | W×(L+3), W | input `[z; p]` → hidden |
+//! | `l1.*` | W×W, W | hidden |
+//! | `l2.*` | W×(W+L+3), W | skip: `[h1; z; p]` → hidden |
+//! | `l3.*` | W×W, W | hidden |
+//! | `l4.*` | 1×W, 1 | output |
+//! | `latents` | N×L | the training shapes' codes |
+//!
+//! Files are `safetensors` (f32) with string metadata (category, command, seed, figures). The
+//! frozen network evaluates in f64 (weights widened at load) with a hand-written reverse pass
+//! for ∂f/∂p and ∂f/∂z; training and batched inference use candle (see `train`, `infer`).
+
+use crate::SdfError;
+use crate::families::Category;
+use candle_core::{Device, Tensor};
+use nalgebra::Vector3;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Latent dimension of the shipped priors.
+pub const LATENT: usize = 32;
+/// Hidden width of the shipped priors.
+pub const WIDTH: usize = 128;
+/// Number of linear layers.
+pub const LAYERS: usize = 5;
+/// Distances are clamped to ±this in the loss (DeepSDF's δ), normalised units.
+pub const CLAMP: f64 = 0.1;
+
+/// `silu(x)` and its derivative.
+#[inline]
+fn silu(x: f64) -> (f64, f64) {
+    let s = 1.0 / (1.0 + (-x).exp());
+    (x * s, s * (1.0 + x * (1.0 - s)))
+}
+
+/// A frozen auto-decoder.
+#[derive(Clone, Debug)]
+pub struct SdfNet {
+    /// The category it models.
+    pub category: Category,
+    /// Latent dimension L.
+    pub latent_dim: usize,
+    /// Hidden width W.
+    pub width: usize,
+    /// Per layer: weights (row-major fan_out × fan_in) and biases.
+    weights: Vec<(Vec<f64>, Vec<f64>)>,
+    /// Codes of the training shapes (rows of length L).
+    pub train_latents: Vec<Vec<f64>>,
+    /// Free-form provenance (command, seed, figures).
+    pub metadata: BTreeMap<String, String>,
+}
+
+fn layer_shapes(l: usize, w: usize) -> [(usize, usize); LAYERS] {
+    [(w, l + 3), (w, w), (w, w + l + 3), (w, w), (1, w)]
+}
+
+impl SdfNet {
+    /// A network from per-layer `(weights, biases)` in f32 (candle's training output).
+    pub fn from_parts(category: Category, latent_dim: usize, width: usize, layers: Vec<(Vec<f32>, Vec<f32>)>, latents: Vec<Vec<f32>>, metadata: BTreeMap<String, String>) -> Result<Self, SdfError> {
+        let shapes = layer_shapes(latent_dim, width);
+        if layers.len() != LAYERS {
+            return Err(SdfError::Invalid(format!("{} layers, expected {LAYERS}", layers.len())));
+        }
+        for (k, ((w, b), (o, i))) in layers.iter().zip(shapes).enumerate() {
+            if w.len() != o * i || b.len() != o {
+                return Err(SdfError::Invalid(format!("layer {k}: {} weights / {} biases, expected {o}×{i} / {o}", w.len(), b.len())));
+            }
+        }
+        if width == 0 || width > 512 || latent_dim == 0 || latent_dim > 64 {
+            return Err(SdfError::Invalid(format!("width {width} / latent {latent_dim} outside 1…512 / 1…64")));
+        }
+        if latents.iter().any(|z| z.len() != latent_dim) {
+            return Err(SdfError::Invalid("a training latent has the wrong length".into()));
+        }
+        let widen = |v: &Vec<f32>| v.iter().map(|x| f64::from(*x)).collect::<Vec<f64>>();
+        Ok(Self {
+            category,
+            latent_dim,
+            width,
+            weights: layers.iter().map(|(w, b)| (widen(w), widen(b))).collect(),
+            train_latents: latents.iter().map(widen).collect(),
+            metadata,
+        })
+    }
+
+    /// Loads a prior, checking every tensor's shape.
+    pub fn load(path: &Path) -> Result<Self, SdfError> {
+        let bytes = std::fs::read(path).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: format!("cannot read: {e}") })?;
+        Self::from_bytes(&bytes).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: e.to_string() })
+    }
+
+    /// Parses a prior from safetensors bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, SdfError> {
+        let bad = |r: String| SdfError::Invalid(r);
+        let st = safetensors::SafeTensors::deserialize(bytes).map_err(|e| bad(format!("not a safetensors file: {e}")))?;
+        let (_, meta) = safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
+        let metadata: BTreeMap<String, String> = meta.metadata().clone().unwrap_or_default().into_iter().collect();
+        let category = Category::parse(metadata.get("category").map(String::as_str).unwrap_or("")).map_err(|_| bad("metadata has no known `category`".into()))?;
+        let get = |name: &str| -> Result<(Vec<usize>, Vec<f32>), SdfError> {
+            let t = st.tensor(name).map_err(|_| bad(format!("missing tensor `{name}`")))?;
+            if t.dtype() != safetensors::Dtype::F32 {
+                return Err(bad(format!("tensor `{name}` is {:?}, expected F32", t.dtype())));
+            }
+            let v = t.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+            Ok((t.shape().to_vec(), v))
+        };
+        let (s0, _) = get("l0.weight")?;
+        if s0.len() != 2 || s0[1] < 4 {
+            return Err(bad(format!("tensor `l0.weight` has shape {s0:?}, expected [W, L+3]")));
+        }
+        let (width, latent_dim) = (s0[0], s0[1] - 3);
+        let mut layers = Vec::new();
+        for (k, (o, i)) in layer_shapes(latent_dim, width).into_iter().enumerate() {
+            let (sw, w) = get(&format!("l{k}.weight"))?;
+            let (sb, b) = get(&format!("l{k}.bias"))?;
+            if sw != [o, i] || sb != [o] {
+                return Err(bad(format!("layer l{k} has shapes {sw:?}/{sb:?}, expected [{o}, {i}]/[{o}]")));
+            }
+            layers.push((w, b));
+        }
+        let (sl, lat) = get("latents")?;
+        if sl.len() != 2 || sl[1] != latent_dim {
+            return Err(bad(format!("tensor `latents` has shape {sl:?}, expected [N, {latent_dim}]")));
+        }
+        let latents = lat.chunks(latent_dim).map(<[f32]>::to_vec).collect();
+        Self::from_parts(category, latent_dim, width, layers, latents, metadata)
+    }
+
+    /// Writes the prior (f32 safetensors with metadata; `category` is added).
+    pub fn save(&self, path: &Path) -> Result<(), SdfError> {
+        let narrow = |v: &[f64]| v.iter().flat_map(|x| (*x as f32).to_le_bytes()).collect::<Vec<u8>>();
+        let mut bufs: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
+        for (k, ((w, b), (o, i))) in self.weights.iter().zip(layer_shapes(self.latent_dim, self.width)).enumerate() {
+            bufs.push((format!("l{k}.weight"), vec![o, i], narrow(w)));
+            bufs.push((format!("l{k}.bias"), vec![o], narrow(b)));
+        }
+        let flat: Vec<f64> = self.train_latents.iter().flatten().copied().collect();
+        bufs.push(("latents".into(), vec![self.train_latents.len(), self.latent_dim], narrow(&flat)));
+        let views: Vec<(String, safetensors::tensor::TensorView)> = bufs
+            .iter()
+            .map(|(n, s, d)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), d)?)))
+            .collect::<Result<_, safetensors::SafeTensorError>>()
+            .map_err(|e| SdfError::Invalid(e.to_string()))?;
+        let mut meta: HashMap<String, String> = self.metadata.clone().into_iter().collect();
+        meta.insert("category".into(), self.category.name().into());
+        let bytes = safetensors::serialize(views, Some(meta)).map_err(|e| SdfError::Invalid(e.to_string()))?;
+        let tmp = path.with_extension("safetensors.partial");
+        std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: format!("cannot write: {e}") })
+    }
+
+    /// The weights as candle tensors (f32, `[fan_out, fan_in]` and `[fan_out]`).
+    pub fn tensors(&self, device: &Device) -> Result<Vec<(Tensor, Tensor)>, SdfError> {
+        layer_shapes(self.latent_dim, self.width)
+            .iter()
+            .zip(&self.weights)
+            .map(|((o, i), (w, b))| {
+                let w32: Vec<f32> = w.iter().map(|x| *x as f32).collect();
+                let b32: Vec<f32> = b.iter().map(|x| *x as f32).collect();
+                Ok((Tensor::from_vec(w32, (*o, *i), device)?, Tensor::from_vec(b32, *o, device)?))
+            })
+            .collect()
+    }
+
+    /// `f(z, p)` for many points at once (candle, f32, chunks of 32k points).
+    pub fn eval_batch(&self, z: &[f64], points: &[Vector3<f64>]) -> Result<Vec<f64>, SdfError> {
+        if z.len() != self.latent_dim {
+            return Err(SdfError::Invalid(format!("latent of length {}, expected {}", z.len(), self.latent_dim)));
+        }
+        let dev = Device::Cpu;
+        let layers = self.tensors(&dev)?;
+        let zt = Tensor::from_vec(z.iter().map(|v| *v as f32).collect::<Vec<f32>>(), (1, self.latent_dim), &dev)?;
+        let mut out = Vec::with_capacity(points.len());
+        for chunk in points.chunks(32_768) {
+            let m = chunk.len();
+            let p: Vec<f32> = chunk.iter().flat_map(|q| [q.x as f32, q.y as f32, q.z as f32]).collect();
+            let x = Tensor::cat(&[&zt.broadcast_as((m, self.latent_dim))?, &Tensor::from_vec(p, (m, 3), &dev)?], 1)?;
+            out.extend(forward(&layers, &x)?.to_vec1::<f32>()?.into_iter().map(f64::from));
+        }
+        Ok(out)
+    }
+
+    /// Mean of the training latents (the starting point of latent inference).
+    pub fn mean_latent(&self) -> Vec<f64> {
+        let n = self.train_latents.len().max(1) as f64;
+        (0..self.latent_dim).map(|k| self.train_latents.iter().map(|z| z[k]).sum::<f64>() / n).collect()
+    }
+
+    /// `f(z, p)` with `(∂f/∂z, ∂f/∂p)`, f64 (reference path; [`LatentSdf`] is the fast one).
+    pub fn eval_full(&self, z: &[f64], p: &Vector3<f64>) -> (f64, Vec<f64>, Vector3<f64>) {
+        let (l, w) = (self.latent_dim, self.width);
+        let mut x: Vec<f64> = z.to_vec();
+        x.extend_from_slice(p.as_slice());
+        let lin = |k: usize, input: &[f64]| -> Vec<f64> {
+            let (wt, b) = &self.weights[k];
+            let n_in = input.len();
+            b.iter().enumerate().map(|(o, bo)| bo + wt[o * n_in..(o + 1) * n_in].iter().zip(input).map(|(a, c)| a * c).sum::<f64>()).collect()
+        };
+        let act = |a: &[f64]| -> (Vec<f64>, Vec<f64>) { a.iter().map(|v| silu(*v)).unzip() };
+        let (h0, d0) = act(&lin(0, &x));
+        let (h1, d1) = act(&lin(1, &h0));
+        let mut in2 = h1.clone();
+        in2.extend_from_slice(&x);
+        let (h2, d2) = act(&lin(2, &in2));
+        let (h3, d3) = act(&lin(3, &h2));
+        let f = lin(4, &h3)[0];
+        // Reverse pass.
+        let back = |k: usize, g: &[f64], n_in: usize| -> Vec<f64> {
+            let wt = &self.weights[k].0;
+            let mut out = vec![0.0; n_in];
+            for (o, go) in g.iter().enumerate() {
+                for (i, oi) in out.iter_mut().enumerate() {
+                    *oi += wt[o * n_in + i] * go;
+                }
+            }
+            out
+        };
+        let g3: Vec<f64> = self.weights[4].0.iter().zip(&d3).map(|(a, b)| a * b).collect();
+        let g2: Vec<f64> = back(3, &g3, w).iter().zip(&d2).map(|(a, b)| a * b).collect();
+        let gin2 = back(2, &g2, w + l + 3);
+        let g1: Vec<f64> = gin2[..w].iter().zip(&d1).map(|(a, b)| a * b).collect();
+        let g0: Vec<f64> = back(1, &g1, w).iter().zip(&d0).map(|(a, b)| a * b).collect();
+        let gx: Vec<f64> = back(0, &g0, l + 3).iter().zip(&gin2[w..]).map(|(a, b)| a + b).collect();
+        (f, gx[..l].to_vec(), Vector3::new(gx[l], gx[l + 1], gx[l + 2]))
+    }
+
+    /// The shape of latent `z` as a field the renderer can trace.
+    pub fn shape(self: &Arc<Self>, z: &[f64]) -> Result<LatentSdf, SdfError> {
+        LatentSdf::new(self.clone(), z)
+    }
+}
+
+/// One shape of a prior: the network with a fixed latent, the latent's contribution to the
+/// first and skip layers folded into their biases (so a point costs only the p columns).
+#[derive(Clone, Debug)]
+pub struct LatentSdf {
+    net: Arc<SdfNet>,
+    /// The latent code.
+    pub latent: Vec<f64>,
+    bias0: Vec<f64>,
+    bias2: Vec<f64>,
+}
+
+impl LatentSdf {
+    /// Folds `z` into the network.
+    pub fn new(net: Arc<SdfNet>, z: &[f64]) -> Result<Self, SdfError> {
+        let (l, w) = (net.latent_dim, net.width);
+        if z.len() != l || z.iter().any(|v| !v.is_finite()) {
+            return Err(SdfError::Invalid(format!("latent of length {} (finite: {}), expected {l} finite values", z.len(), z.iter().all(|v| v.is_finite()))));
+        }
+        let fold = |k: usize, n_in: usize, offset: usize| -> Vec<f64> {
+            let (wt, b) = &net.weights[k];
+            (0..w).map(|o| b[o] + (0..l).map(|i| wt[o * n_in + offset + i] * z[i]).sum::<f64>()).collect()
+        };
+        let bias0 = fold(0, l + 3, 0);
+        let bias2 = fold(2, w + l + 3, w);
+        Ok(Self { net, latent: z.to_vec(), bias0, bias2 })
+    }
+
+    /// Signed distance and its gradient with respect to the point (normalised frame).
+    pub fn value_grad(&self, p: &Vector3<f64>) -> (f64, Vector3<f64>) {
+        let (l, w) = (self.net.latent_dim, self.net.width);
+        let wts = &self.net.weights;
+        let mut a0 = [0.0f64; 512];
+        let mut d0 = [0.0f64; 512];
+        let mut h0 = [0.0f64; 512];
+        let mut d1 = [0.0f64; 512];
+        let mut h1 = [0.0f64; 512];
+        let mut d2 = [0.0f64; 512];
+        let mut h2 = [0.0f64; 512];
+        let mut d3 = [0.0f64; 512];
+        let mut h3 = [0.0f64; 512];
+        let n0 = l + 3;
+        for o in 0..w {
+            let r = &wts[0].0[o * n0 + l..o * n0 + l + 3];
+            a0[o] = self.bias0[o] + r[0] * p.x + r[1] * p.y + r[2] * p.z;
+            (h0[o], d0[o]) = silu(a0[o]);
+        }
+        for o in 0..w {
+            let row = &wts[1].0[o * w..(o + 1) * w];
+            let a = wts[1].1[o] + row.iter().zip(&h0[..w]).map(|(x, y)| x * y).sum::<f64>();
+            (h1[o], d1[o]) = silu(a);
+        }
+        let n2 = w + l + 3;
+        for o in 0..w {
+            let row = &wts[2].0[o * n2..(o + 1) * n2];
+            let a = self.bias2[o] + row[..w].iter().zip(&h1[..w]).map(|(x, y)| x * y).sum::<f64>() + row[w + l] * p.x + row[w + l + 1] * p.y + row[w + l + 2] * p.z;
+            (h2[o], d2[o]) = silu(a);
+        }
+        for o in 0..w {
+            let row = &wts[3].0[o * w..(o + 1) * w];
+            let a = wts[3].1[o] + row.iter().zip(&h2[..w]).map(|(x, y)| x * y).sum::<f64>();
+            (h3[o], d3[o]) = silu(a);
+        }
+        let f = wts[4].1[0] + wts[4].0.iter().zip(&h3[..w]).map(|(x, y)| x * y).sum::<f64>();
+        // Reverse pass (reusing h* as gradient buffers).
+        let g3 = &mut h3;
+        for o in 0..w {
+            g3[o] = wts[4].0[o] * d3[o];
+        }
+        let g2 = &mut h2;
+        g2[..w].fill(0.0);
+        for o in 0..w {
+            let row = &wts[3].0[o * w..(o + 1) * w];
+            for i in 0..w {
+                g2[i] += row[i] * g3[o];
+            }
+        }
+        let mut gp = Vector3::zeros();
+        for i in 0..w {
+            g2[i] *= d2[i];
+        }
+        let g1 = &mut h1;
+        g1[..w].fill(0.0);
+        for o in 0..w {
+            let row = &wts[2].0[o * n2..(o + 1) * n2];
+            for i in 0..w {
+                g1[i] += row[i] * g2[o];
+            }
+            gp += Vector3::new(row[w + l], row[w + l + 1], row[w + l + 2]) * g2[o];
+        }
+        for i in 0..w {
+            g1[i] *= d1[i];
+        }
+        let g0 = &mut h0;
+        g0[..w].fill(0.0);
+        for o in 0..w {
+            let row = &wts[1].0[o * w..(o + 1) * w];
+            for i in 0..w {
+                g0[i] += row[i] * g1[o];
+            }
+        }
+        for o in 0..w {
+            let r = &wts[0].0[o * n0 + l..o * n0 + l + 3];
+            gp += Vector3::new(r[0], r[1], r[2]) * (g0[o] * d0[o]);
+        }
+        (f, gp)
+    }
+}
+
+impl irmirror_render::sdf::Sdf for LatentSdf {
+    fn distance(&self, p: &Vector3<f64>) -> f64 {
+        self.value_grad(p).0
+    }
+    fn gradient(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.value_grad(p).1
+    }
+    fn bounding_radius(&self) -> f64 {
+        1.0
+    }
+}
+
+/// Batched forward pass in candle: `x` is `[N, L+3]` (latent then point), the result `[N]`.
+pub(crate) fn forward(layers: &[(Tensor, Tensor)], x: &Tensor) -> candle_core::Result<Tensor> {
+    let lin = |k: usize, h: &Tensor| h.matmul(&layers[k].0.t()?)?.broadcast_add(&layers[k].1);
+    let h = lin(0, x)?.silu()?;
+    let h = lin(1, &h)?.silu()?;
+    let h = lin(2, &Tensor::cat(&[&h, x], 1)?)?.silu()?;
+    let h = lin(3, &h)?.silu()?;
+    lin(4, &h)?.squeeze(1)
+}

@@ -1,0 +1,211 @@
+//! Object priors: generators, samples, the network's gradients, training, inference, files.
+
+use irmirror_sdf::infer::{InferConfig, from_samples, from_surface};
+use irmirror_sdf::mesh_io::{normalise, open_edges, read_mesh};
+use irmirror_sdf::train::{TrainSdfConfig, procedural, sample_meshes, train};
+use irmirror_sdf::{Category, MeshSdf, SdfError, SdfNet};
+use nalgebra::Vector3;
+use rand::Rng;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+fn tmpdir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("irmirror-sdf-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn generators_are_watertight_outward_and_normalised() {
+    for cat in Category::ALL {
+        for (shape, mesh) in procedural(cat, 2, 3, 1, 64) {
+            assert_eq!(open_edges(&mesh), 0, "{cat:?}: open edges");
+            assert!(mesh.signed_volume() > 0.0, "{cat:?}: inward or empty");
+            for v in &mesh.vertices {
+                let p = Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+                assert!(p.norm() < 1.0, "{cat:?}: vertex outside the unit sphere");
+                assert!(shape.distance(&p).abs() < 0.02, "{cat:?}: vertex off the surface by {}", shape.distance(&p));
+            }
+        }
+    }
+}
+
+#[test]
+fn sample_signs_agree_with_the_analytic_inside() {
+    for cat in Category::ALL {
+        let (shape, mesh) = procedural(cat, 1, 5, 1, 96).pop().unwrap();
+        let s = MeshSdf::new(&mesh).samples(3000, &mut irmirror_geom::rng::seeded(1, 1));
+        assert_eq!(s.points.len(), 3000);
+        let (mut checked, mut wrong) = (0, 0);
+        for (p, d) in s.points.iter().zip(&s.sdf) {
+            let a = shape.distance(&Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])));
+            // Away from the surface the meshing error (< 0.01) cannot flip the sign.
+            if a.abs() > 0.01 {
+                checked += 1;
+                wrong += usize::from((a < 0.0) != (*d < 0.0));
+                // Car and mug fields are bounds (smooth unions, cut-outs), not exact distances.
+                assert!((f64::from(*d) - a).abs() < 0.1, "{cat:?}: sample {d} vs analytic {a}");
+            }
+        }
+        assert!(checked > 1500);
+        assert_eq!(wrong, 0, "{cat:?}: {wrong}/{checked} signs disagree");
+        // Both sides are represented.
+        assert!(s.sdf.iter().filter(|d| **d < 0.0).count() > 300);
+    }
+}
+
+fn random_net(l: usize, w: usize, seed: u64) -> SdfNet {
+    let mut rng = irmirror_geom::rng::seeded(seed, 0);
+    let shapes = [(w, l + 3), (w, w), (w, w + l + 3), (w, w), (1, w)];
+    let layers = shapes
+        .iter()
+        .map(|&(o, i)| {
+            let b = (3.0 / i as f64).sqrt();
+            ((0..o * i).map(|_| rng.random_range(-b..b) as f32).collect(), (0..o).map(|_| rng.random_range(-0.1..0.1) as f32).collect())
+        })
+        .collect();
+    let latents = vec![(0..l).map(|_| rng.random_range(-0.5..0.5) as f32).collect()];
+    SdfNet::from_parts(Category::Mug, l, w, layers, latents, BTreeMap::new()).unwrap()
+}
+
+#[test]
+fn network_gradients_match_finite_differences() {
+    let net = Arc::new(random_net(8, 16, 2));
+    let z: Vec<f64> = net.train_latents[0].clone();
+    let shape = net.shape(&z).unwrap();
+    let h = 1e-6;
+    for p in [Vector3::new(0.1, -0.3, 0.5), Vector3::new(-0.7, 0.2, 0.05)] {
+        let (f, gz, gp) = net.eval_full(&z, &p);
+        let (f2, gp2) = shape.value_grad(&p);
+        assert!((f - f2).abs() < 1e-12, "folded latent changes the value");
+        assert!((gp - gp2).norm() < 1e-12, "fast and reference point gradients differ");
+        for k in 0..3 {
+            let mut e = Vector3::zeros();
+            e[k] = h;
+            let fd = (net.eval_full(&z, &(p + e)).0 - net.eval_full(&z, &(p - e)).0) / (2.0 * h);
+            assert!((fd - gp[k]).abs() < 1e-7 * (1.0 + fd.abs()), "∂f/∂p{k}: {fd} vs {}", gp[k]);
+        }
+        for k in 0..z.len() {
+            let (mut zp, mut zm) = (z.clone(), z.clone());
+            zp[k] += h;
+            zm[k] -= h;
+            let fd = (net.eval_full(&zp, &p).0 - net.eval_full(&zm, &p).0) / (2.0 * h);
+            assert!((fd - gz[k]).abs() < 1e-7 * (1.0 + fd.abs()), "∂f/∂z{k}: {fd} vs {}", gz[k]);
+        }
+        // The batched (candle, f32) path agrees with the f64 one.
+        let b = net.eval_batch(&z, &[p]).unwrap()[0];
+        assert!((b - f).abs() < 1e-4 * (1.0 + f.abs()), "{b} vs {f}");
+    }
+}
+
+#[test]
+fn tiny_training_learns_and_inference_recovers_a_training_shape() {
+    let shapes = procedural(Category::Mug, 4, 9, 1, 48);
+    let meshes: Vec<_> = shapes.iter().map(|(_, m)| m).collect();
+    let data = sample_meshes(&meshes, 4000, 9);
+    let cfg = TrainSdfConfig { steps: 300, width: 64, shapes_per_batch: 4, points_per_shape: 512, ..Default::default() };
+    let mut curve = Vec::new();
+    let (net, report) = train(Category::Mug, &data, &cfg, BTreeMap::new(), |_, l| curve.push(l)).unwrap();
+    assert!(report.final_l1 < 0.8 * curve[0], "loss {} → {}", curve[0], report.final_l1);
+    // Determinism: the same seed gives the same network.
+    let short = TrainSdfConfig { steps: 20, ..cfg.clone() };
+    let (a, _) = train(Category::Mug, &data, &short, BTreeMap::new(), |_, _| {}).unwrap();
+    let (b, _) = train(Category::Mug, &data, &short, BTreeMap::new(), |_, _| {}).unwrap();
+    assert_eq!(a.train_latents, b.train_latents);
+    // Inference on shape 0's samples fits them about as well as its trained latent.
+    let l1 = |z: &[f64]| {
+        let pts: Vec<Vector3<f64>> = data[0].points.iter().map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).collect();
+        let f = net.eval_batch(z, &pts).unwrap();
+        f.iter().zip(&data[0].sdf).map(|(a, b)| (a.clamp(-0.1, 0.1) - f64::from(*b).clamp(-0.1, 0.1)).abs()).sum::<f64>() / f.len() as f64
+    };
+    let trained = l1(&net.train_latents[0]);
+    let inferred = from_samples(&net, &data[0], &InferConfig { steps: 200, ..Default::default() }).unwrap();
+    let mean = l1(&net.mean_latent());
+    assert!(l1(&inferred.latent) < 1.3 * trained + 2e-3, "inferred {} vs trained {trained}", l1(&inferred.latent));
+    assert!(l1(&inferred.latent) < mean, "inference does not improve on the mean latent");
+    // From surface points only (plus free space), the fit also beats the mean shape.
+    let surface: Vec<[f32; 3]> = data[0].points.iter().zip(&data[0].sdf).filter(|(_, d)| d.abs() < 0.005).map(|(p, _)| *p).collect();
+    let free: Vec<[f32; 3]> = data[0].points.iter().zip(&data[0].sdf).filter(|(_, d)| **d > 0.05).map(|(p, _)| *p).collect();
+    let s = from_surface(&net, &surface, &free, &InferConfig { steps: 200, ..Default::default() }).unwrap();
+    let on_surface = |z: &[f64]| {
+        let pts: Vec<Vector3<f64>> = surface.iter().map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).collect();
+        net.eval_batch(z, &pts).unwrap().iter().map(|f| f.abs()).sum::<f64>() / pts.len() as f64
+    };
+    assert!(on_surface(&s.latent) < 0.8 * on_surface(&net.mean_latent()), "surface inference: {} vs mean {}", on_surface(&s.latent), on_surface(&net.mean_latent()));
+}
+
+#[test]
+fn weights_round_trip_and_bad_weights_are_clear_errors() {
+    let dir = tmpdir("weights");
+    let net = random_net(8, 16, 4);
+    let path = dir.join("p.safetensors");
+    net.save(&path).unwrap();
+    let back = SdfNet::load(&path).unwrap();
+    assert_eq!(back.category, Category::Mug);
+    let p = Vector3::new(0.2, 0.1, -0.3);
+    let z = net.train_latents[0].clone();
+    assert!((back.eval_full(&z, &p).0 - net.eval_full(&z, &p).0).abs() < 1e-5);
+    // Truncated file.
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(dir.join("t.safetensors"), &bytes[..bytes.len() / 2]).unwrap();
+    assert!(matches!(SdfNet::load(&dir.join("t.safetensors")), Err(SdfError::Weights { .. })));
+    // A pose-prior-like file (wrong tensors).
+    assert!(SdfNet::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/pose_prior/pose_vae.safetensors"))).is_err());
+    // Missing file.
+    let e = SdfNet::load(&dir.join("missing.safetensors")).unwrap_err().to_string();
+    assert!(e.contains("cannot read"), "{e}");
+    // Wrong latent length.
+    assert!(Arc::new(net).shape(&[0.0; 3]).is_err());
+    assert!(Category::parse("chair").is_err());
+}
+
+#[test]
+fn bad_meshes_are_clear_errors_and_stl_is_welded() {
+    let dir = tmpdir("meshes");
+    std::fs::write(dir.join("empty.obj"), "").unwrap();
+    assert!(read_mesh(&dir.join("empty.obj")).is_err());
+    std::fs::write(dir.join("nan.obj"), "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n").unwrap();
+    assert!(read_mesh(&dir.join("nan.obj")).is_err());
+    std::fs::write(dir.join("x.stl"), "garbage").unwrap();
+    assert!(read_mesh(&dir.join("x.stl")).is_err());
+    assert!(read_mesh(&dir.join("missing.ply")).is_err());
+    assert!(read_mesh(&dir.join("a.xyz")).is_err());
+    // A cube as ASCII and binary STL: welded into a closed mesh.
+    let cube = irmirror_geom::mesh::unit_cube();
+    let mut ascii = String::from("solid cube\n");
+    let mut bin = vec![0u8; 80];
+    bin.extend((cube.triangles.len() as u32).to_le_bytes());
+    for t in &cube.triangles {
+        ascii.push_str(" facet normal 0 0 0\n  outer loop\n");
+        bin.extend([0u8; 12]);
+        for &i in t {
+            let v = cube.vertices[i as usize];
+            ascii.push_str(&format!("   vertex {} {} {}\n", v[0], v[1], v[2]));
+            for c in v {
+                bin.extend(c.to_le_bytes());
+            }
+        }
+        ascii.push_str("  endloop\n endfacet\n");
+        bin.extend([0u8; 2]);
+    }
+    ascii.push_str("endsolid cube\n");
+    std::fs::write(dir.join("a.stl"), ascii).unwrap();
+    std::fs::write(dir.join("b.stl"), bin).unwrap();
+    for f in ["a.stl", "b.stl"] {
+        let mut m = read_mesh(&dir.join(f)).unwrap();
+        assert_eq!(m.vertices.len(), 8, "{f}");
+        assert_eq!(open_edges(&m), 0, "{f}");
+        normalise(&mut m);
+        let r = m.vertices.iter().map(|v| v.iter().map(|x| x * x).sum::<f32>().sqrt()).fold(0.0, f32::max);
+        assert!((r - 0.9).abs() < 1e-5, "normalised radius {r}");
+        // The cube's winding number is 1 at its centre after normalisation.
+        assert!((MeshSdf::new(&m).winding_number(&Vector3::zeros()) - 1.0).abs() < 1e-9);
+    }
+    // An open mesh (one face removed) still gets a best-effort sign at the centre.
+    let mut open = cube.clone();
+    open.triangles.pop();
+    normalise(&mut open);
+    assert!(open_edges(&open) > 0);
+    assert!(MeshSdf::new(&open).signed_distance(&Vector3::zeros()) < 0.0);
+}
