@@ -54,8 +54,10 @@ pub const SEED_BASE: u64 = 10_000;
 /// One stage-2 run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct VariantResult {
-    /// Figures.
-    pub eval: Evaluation,
+    /// Figures (`None` when the reconstruction failed).
+    pub eval: Option<Evaluation>,
+    /// Why the reconstruction failed (a failure is a result, not an abort).
+    pub error: Option<String>,
     /// Stage-2 seconds (rays + fit).
     pub time_s: f64,
 }
@@ -216,7 +218,29 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
                 Err(e) => return Err(e).with_context(|| format!("{id}: stage 0")),
             }
         };
-        let objects = reconstruct_objects(&capture, &cfg.objects, *seed).with_context(|| format!("{id}: stage 1"))?;
+        let objects = match reconstruct_objects(&capture, &cfg.objects, *seed) {
+            Ok(o) => o,
+            Err(e) => {
+                tracing::warn!("{id}: stage 1 failed: {e}");
+                let failed = VariantResult { eval: None, error: Some(format!("stage 1: {e}")), time_s: 0.0 };
+                let variants = VARIANTS.iter().map(|(n, _)| (n.to_string(), failed.clone())).collect();
+                bar.inc(VARIANTS.len() as u64);
+                results.push(CaptureResult {
+                    id: id.clone(),
+                    category: category.to_string(),
+                    seed: *seed,
+                    netd_mk: *netd,
+                    thermal_width: capture.thermal_camera.width,
+                    reflection_pixels: sim.report.reflection_pixels,
+                    person_distance_m: sim.body.joints[0].norm(),
+                    objects_time_s: t0.elapsed().as_secs_f64(),
+                    object_chamfer_mm2: vec![],
+                    variants,
+                    random: vec![],
+                });
+                continue;
+            }
+        };
         let objects_time_s = t0.elapsed().as_secs_f64();
         let object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| chamfer_mm2(&crate::result::object_mesh(o), m)).collect();
         let mut variants = BTreeMap::new();
@@ -225,11 +249,19 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
         for (name, ablation) in VARIANTS {
             let cfg = ReconConfig { ablate: ablation.into_iter().collect(), ..ReconConfig::default() };
             let t0 = Instant::now();
-            let rec = reconstruct_human(&capture, pre.clone(), objects.clone(), &model, &prior, &cfg, *seed, &Silent).with_context(|| format!("{id}: stage 2 ({name})"))?;
+            let rec = match reconstruct_human(&capture, pre.clone(), objects.clone(), &model, &prior, &cfg, *seed, &Silent) {
+                Ok(r) => r,
+                Err(e) => {
+                    tracing::warn!("{id}: stage 2 ({name}) failed: {e}");
+                    variants.insert(name.to_string(), VariantResult { eval: None, error: Some(e.to_string()), time_s: t0.elapsed().as_secs_f64() });
+                    bar.inc(1);
+                    continue;
+                }
+            };
             let time_s = t0.elapsed().as_secs_f64();
             let body = posed_body(&model, &prior, &rec.states[0])?;
             let mask = fitted_mask(&model, &rec.rays, &body);
-            let eval = evaluate(&sim, &body, &mask, &rec.objects)?;
+            let eval = Some(evaluate(&sim, &body, &mask, &rec.objects)?);
             if ablation.is_none() {
                 save_png(&crate::result::overlay(&rec.pre.rise_k, &rec.pre.mask, &mask), &thumbs.join("overlay.png"))?;
                 let third = &sim.scene.third_camera;
@@ -246,7 +278,7 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
                 );
                 save_png(&image::imageops::thumbnail(&view, 160, 120), &thumbs.join("third.png"))?;
             }
-            variants.insert(name.to_string(), VariantResult { eval, time_s });
+            variants.insert(name.to_string(), VariantResult { eval, error: None, time_s });
             bar.inc(1);
         }
         // Random baseline: true root position and orientation, random pose latents.
@@ -318,7 +350,7 @@ pub fn markdown_table(r: &Report) -> String {
             }
             s.push_str(&format!("| {metric} | {cat} | {} |", caps.len()));
             for (name, _) in VARIANTS {
-                let v: Vec<f64> = caps.iter().filter_map(|c| c.variants.get(name).and_then(|x| get(&x.eval))).collect();
+                let v: Vec<f64> = caps.iter().filter_map(|c| c.variants.get(name).and_then(|x| x.eval.as_ref()).and_then(get)).collect();
                 s.push_str(&format!(" {} |", cell(&v)));
             }
             // Random: the per-capture mean over draws, then the mean over captures.
@@ -332,6 +364,17 @@ pub fn markdown_table(r: &Report) -> String {
             s.push_str(&format!(" {} |\n", cell(&v)));
         }
     }
+    for cat in CATEGORIES {
+        let caps: Vec<&CaptureResult> = r.captures.iter().filter(|c| c.category == cat).collect();
+        if caps.is_empty() {
+            continue;
+        }
+        s.push_str(&format!("| failed reconstructions | {cat} | {} |", caps.len()));
+        for (name, _) in VARIANTS {
+            s.push_str(&format!(" {} |", caps.iter().filter(|c| c.variants.get(name).is_none_or(|v| v.eval.is_none())).count()));
+        }
+        s.push_str(" – |\n");
+    }
     s.push_str("\n| object | objects: translation error (mm) | scale error (%) | Chamfer (mm²) | stage 0–1 time (s) | stage 2 time, full model (s) |\n|---|---|---|---|---|---|\n");
     for cat in CATEGORIES {
         let caps: Vec<&CaptureResult> = r.captures.iter().filter(|c| c.category == cat).collect();
@@ -339,8 +382,9 @@ pub fn markdown_table(r: &Report) -> String {
             continue;
         }
         let full = |c: &&CaptureResult| c.variants.get("full model").cloned();
-        let t: Vec<f64> = caps.iter().filter_map(full).flat_map(|v| v.eval.object_translation_error_m.iter().map(|x| x * 1e3).collect::<Vec<_>>()).collect();
-        let sc: Vec<f64> = caps.iter().filter_map(full).flat_map(|v| v.eval.object_scale_error_pct.clone()).collect();
+        let full_eval = |c: &&CaptureResult| full(c).and_then(|v| v.eval);
+        let t: Vec<f64> = caps.iter().filter_map(full_eval).flat_map(|e| e.object_translation_error_m.iter().map(|x| x * 1e3).collect::<Vec<_>>()).collect();
+        let sc: Vec<f64> = caps.iter().filter_map(full_eval).flat_map(|e| e.object_scale_error_pct).collect();
         let ch: Vec<f64> = caps.iter().flat_map(|c| c.object_chamfer_mm2.clone()).collect();
         let t1: Vec<f64> = caps.iter().map(|c| c.objects_time_s).collect();
         let t2: Vec<f64> = caps.iter().filter_map(full).map(|v| v.time_s).collect();
@@ -352,7 +396,7 @@ pub fn markdown_table(r: &Report) -> String {
 fn html(r: &Report, table: &str) -> String {
     let mut rows = String::new();
     for c in &r.captures {
-        let full = c.variants.get("full model");
+        let full = c.variants.get("full model").and_then(|v| v.eval.as_ref());
         let f = |x: Option<f64>| x.map_or("n/a".into(), |v| format!("{v:.3}"));
         rows.push_str(&format!(
             "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td><img src=\"captures/{}/overlay.png\" width=\"160\"></td><td><img src=\"captures/{}/third.png\" width=\"160\"></td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
@@ -361,9 +405,9 @@ fn html(r: &Report, table: &str) -> String {
             c.person_distance_m,
             c.id,
             c.id,
-            f(full.and_then(|v| v.eval.keypoints_2d_normalised)),
-            f(full.and_then(|v| v.eval.keypoints_3d_normalised)),
-            f(full.map(|v| v.eval.root_error_m)),
+            f(full.and_then(|e| e.keypoints_2d_normalised)),
+            f(full.and_then(|e| e.keypoints_3d_normalised)),
+            f(full.map(|e| e.root_error_m)),
         ));
     }
     let table_html: String = table
@@ -416,7 +460,14 @@ mod tests {
                 person_distance_m: 2.0,
                 objects_time_s: 0.5,
                 object_chamfer_mm2: vec![0.25],
-                variants: VARIANTS.iter().map(|(n, _)| (n.to_string(), VariantResult { eval: eval(k as f64), time_s: 1.0 })).collect(),
+                variants: VARIANTS
+                    .iter()
+                    .map(|(n, a)| {
+                        // One failure: the full model on the last capture.
+                        let failed = a.is_none() && k == 2;
+                        (n.to_string(), VariantResult { eval: (!failed).then(|| eval(k as f64)), error: failed.then(|| "x".to_string()), time_s: 1.0 })
+                    })
+                    .collect(),
                 random: vec![eval(1.0), eval(3.0)],
             })
             .collect();
@@ -426,6 +477,9 @@ mod tests {
         let t = markdown_table(&r);
         // Values 0, 1, 2: mean 1, sd 1, t(2) 4.303 → ± 2.484; random: mean of (1 + 3)/2 = 2.
         assert!(t.contains("| root error (m) | mug | 3 | 1.000 ± 2.484 |"), "{t}");
+        // The full model failed once: its mean is over the two others (0, 1), and it is counted.
+        assert!(t.contains("| 0.500 ± 6.353 | 2.000 ± 0.000 |"), "{t}");
+        assert!(t.contains("| failed reconstructions | mug | 3 | 0 | 0 | 0 | 1 | – |"), "{t}");
         assert!(t.contains("2.000 ± 0.000 |"), "{t}");
         assert!(t.contains("| 3-D keypoints, normalised | mug | 3 | n/a |"), "{t}");
         assert!(!t.contains("| bowl |"), "rows without captures are left out");

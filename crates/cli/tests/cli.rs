@@ -254,3 +254,37 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
     let o = irmirror(&["train-sdf", "--category", "mug", "--out", dir.join("x.bin").to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains(".safetensors"));
 }
+
+#[test]
+fn eval_writes_table_results_and_report() {
+    // One capture per object type (the whole quick set is the ignored test below).
+    let out = tmp("eval");
+    let o = irmirror(&["eval", "--preset", "quick", "--limit", "1", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = std::fs::read_to_string(out.join("table.md")).unwrap();
+    for row in ["| 2-D keypoints, normalised | bowl | 1 |", "| 3-D keypoints, normalised | mug | 1 |", "| root error (m) | car | 1 |"] {
+        assert!(table.contains(row), "{table}");
+    }
+    let results: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let caps = results["captures"].as_array().unwrap();
+    assert_eq!(caps.len(), 3);
+    for c in caps {
+        assert_eq!(c["variants"].as_object().unwrap().len(), 4);
+        // The random baseline sits at the true root.
+        assert!(c["random"][0]["root_error_m"].as_f64().unwrap() < 1e-6);
+        let id = c["id"].as_str().unwrap();
+        assert!(out.join(format!("captures/{id}/overlay.png")).is_file());
+        assert!(out.join(format!("captures/{id}/third.png")).is_file());
+    }
+    assert!(std::fs::read_to_string(out.join("report.html")).unwrap().contains("captures/car_00/third.png"));
+    assert!(out.join("run.toml").is_file());
+    assert!(!out.join("scratch").exists());
+}
+
+#[test]
+#[ignore = "slow: the whole quick benchmark (12 captures, ≈ 10 min on 2 cores)"]
+fn eval_quick_set_runs() {
+    let out = tmp("eval-quick");
+    let o = irmirror(&["eval", "--preset", "quick", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

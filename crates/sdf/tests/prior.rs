@@ -209,3 +209,24 @@ fn bad_meshes_are_clear_errors_and_stl_is_welded() {
     assert!(open_edges(&open) > 0);
     assert!(MeshSdf::new(&open).signed_distance(&Vector3::zeros()) < 0.0);
 }
+
+#[test]
+fn shipped_priors_load_and_describe_a_closed_surface() {
+    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/object_priors"));
+    for cat in Category::ALL {
+        let net = Arc::new(SdfNet::load(&dir.join(format!("{}.safetensors", cat.name()))).unwrap());
+        assert_eq!(net.category, cat);
+        assert!(net.metadata["command"].contains(&format!("--category {}", cat.name())), "provenance");
+        // A training shape: outside at the corners of the box, inside somewhere, a surface.
+        let shape = net.shape(&net.train_latents[0]).unwrap();
+        let grid: Vec<Vector3<f64>> = irmirror_geom::isosurface::grid_points(Vector3::repeat(-1.0), Vector3::repeat(1.0), 24);
+        let v = net.eval_batch(&net.train_latents[0], &grid).unwrap();
+        assert!(v.iter().any(|d| *d < 0.0), "{cat:?}: no inside");
+        for corner in [Vector3::new(1.0, 1.0, 1.0), Vector3::new(-1.0, -1.0, 1.0)] {
+            assert!(shape.value_grad(&corner).0 > 0.0, "{cat:?}: corner inside");
+        }
+        let m = irmirror_sdf::quality::extract_mesh(&net, &net.train_latents[0], 32).unwrap();
+        assert_eq!(open_edges(&m), 0);
+        assert!(m.signed_volume() > 0.0);
+    }
+}
