@@ -4,13 +4,11 @@
 
 use crate::output::{Staging, save_png, write_text};
 use crate::reconstruct_cmd::Bars;
-use crate::result::Drawn;
 use crate::simulate_cmd::{Preset, Thermal, preset_scene};
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
-use irmirror_geom::nalgebra::Vector3;
 use irmirror_recon::pipeline::{Progress, ReconConfig, reconstruct};
 use serde::Serialize;
 use std::path::Path;
@@ -54,22 +52,9 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
 
     // Evaluation (the truth is read only here).
     let best = &written.best;
-    let third = &sim.scene.third_camera;
-    let depth_from_third = sim.scene.depth_camera.world_from_camera.to_rigid()?.inverse() * third.world_from_camera.to_rigid()?;
     let eval = crate::evaluate::evaluate(&sim, best, &written.fitted_mask, &rec.objects)?;
     write_text(&stage.path("eval.json"), &serde_json::to_string_pretty(&eval)?)?;
-    // The third camera: fitted (orange) and true (green) bodies with the fitted objects.
-    let truth_vertices: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
-    let faces = &model.asset.faces;
-    let view = crate::result::render_view(
-        &third.intrinsics,
-        &depth_from_third,
-        &[
-            Drawn { vertices: &best.vertices, triangles: faces, colour: [240, 150, 60] },
-            Drawn { vertices: &truth_vertices, triangles: &sim.body.mesh.triangles, colour: [80, 200, 90] },
-        ],
-        &rec.objects.placed(),
-    );
+    let view = crate::evaluate::third_view(&sim, &model, best, &rec.objects)?;
     save_png(&view, &stage.path("views/third_camera.png"))?;
 
     let scene_text = toml::to_string(&scene)?;

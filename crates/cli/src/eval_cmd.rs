@@ -9,7 +9,7 @@
 
 use crate::evaluate::{Evaluation, evaluate, fitted_mask};
 use crate::output::{Staging, save_png, write_text};
-use crate::result::{Drawn, posed_body, render_view};
+use crate::result::posed_body;
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
@@ -200,8 +200,8 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
     let mut results = Vec::new();
     for (id, category, seed, netd) in &list {
         bar.set_message(id.clone());
-        // Draw until stage 0 sees the reflection through the sensor noise (the benchmark measures
-        // reconstruction from a visible reflection; `skipped_draws` says how many were not).
+        // Draw until stage 0 sees the reflection through the sensor noise: the benchmark measures
+        // reconstruction from a visible reflection.
         let cfg = ReconConfig::default();
         let mut first = 0;
         let (sc, sim, capture, pre, t0) = loop {
@@ -218,32 +218,33 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
                 Err(e) => return Err(e).with_context(|| format!("{id}: stage 0")),
             }
         };
-        let objects = match reconstruct_objects(&capture, &cfg.objects, *seed) {
+        let mut result = CaptureResult {
+            id: id.clone(),
+            category: category.to_string(),
+            seed: *seed,
+            netd_mk: *netd,
+            thermal_width: capture.thermal_camera.width,
+            reflection_pixels: sim.report.reflection_pixels,
+            person_distance_m: sim.body.joints[0].norm(),
+            objects_time_s: 0.0,
+            object_chamfer_mm2: vec![],
+            variants: BTreeMap::new(),
+            random: vec![],
+        };
+        let objects = reconstruct_objects(&capture, &cfg.objects, *seed);
+        result.objects_time_s = t0.elapsed().as_secs_f64();
+        let objects = match objects {
             Ok(o) => o,
             Err(e) => {
                 tracing::warn!("{id}: stage 1 failed: {e}");
                 let failed = VariantResult { eval: None, error: Some(format!("stage 1: {e}")), time_s: 0.0 };
-                let variants = VARIANTS.iter().map(|(n, _)| (n.to_string(), failed.clone())).collect();
+                result.variants = VARIANTS.iter().map(|(n, _)| (n.to_string(), failed.clone())).collect();
                 bar.inc(VARIANTS.len() as u64);
-                results.push(CaptureResult {
-                    id: id.clone(),
-                    category: category.to_string(),
-                    seed: *seed,
-                    netd_mk: *netd,
-                    thermal_width: capture.thermal_camera.width,
-                    reflection_pixels: sim.report.reflection_pixels,
-                    person_distance_m: sim.body.joints[0].norm(),
-                    objects_time_s: t0.elapsed().as_secs_f64(),
-                    object_chamfer_mm2: vec![],
-                    variants,
-                    random: vec![],
-                });
+                results.push(result);
                 continue;
             }
         };
-        let objects_time_s = t0.elapsed().as_secs_f64();
-        let object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| chamfer_mm2(&crate::result::object_mesh(o), m)).collect();
-        let mut variants = BTreeMap::new();
+        result.object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| chamfer_mm2(&crate::result::object_mesh(o), m)).collect();
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs)?;
         for (name, ablation) in VARIANTS {
@@ -253,7 +254,7 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
                 Ok(r) => r,
                 Err(e) => {
                     tracing::warn!("{id}: stage 2 ({name}) failed: {e}");
-                    variants.insert(name.to_string(), VariantResult { eval: None, error: Some(e.to_string()), time_s: t0.elapsed().as_secs_f64() });
+                    result.variants.insert(name.to_string(), VariantResult { eval: None, error: Some(e.to_string()), time_s: t0.elapsed().as_secs_f64() });
                     bar.inc(1);
                     continue;
                 }
@@ -264,53 +265,24 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
             let eval = Some(evaluate(&sim, &body, &mask, &rec.objects)?);
             if ablation.is_none() {
                 save_png(&crate::result::overlay(&rec.pre.rise_k, &rec.pre.mask, &mask), &thumbs.join("overlay.png"))?;
-                let third = &sim.scene.third_camera;
-                let depth_from_third = sim.scene.depth_camera.world_from_camera.to_rigid()?.inverse() * third.world_from_camera.to_rigid()?;
-                let truth: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
-                let view = render_view(
-                    &third.intrinsics,
-                    &depth_from_third,
-                    &[
-                        Drawn { vertices: &body.vertices, triangles: &model.asset.faces, colour: [240, 150, 60] },
-                        Drawn { vertices: &truth, triangles: &sim.body.mesh.triangles, colour: [80, 200, 90] },
-                    ],
-                    &rec.objects.placed(),
-                );
+                let view = crate::evaluate::third_view(&sim, &model, &body, &rec.objects)?;
                 save_png(&image::imageops::thumbnail(&view, 160, 120), &thumbs.join("third.png"))?;
             }
-            variants.insert(name.to_string(), VariantResult { eval, error: None, time_s });
+            result.variants.insert(name.to_string(), VariantResult { eval, error: None, time_s });
             bar.inc(1);
         }
         // Random baseline: true root position and orientation, random pose latents.
         let mut rng = irmirror_geom::rng::seeded(*seed, 99);
         let truth_root = sim.body.depth_from_anny.rotation * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0]));
-        let mut random = Vec::new();
-        let rays = {
-            let cfg = ReconConfig::default();
-            let (trace, normals) = cfg.rays_settings();
-            let placed = objects.placed();
-            irmirror_recon::pipeline::unblocked(&irmirror_render::reflect_camera(&capture.thermal_camera, &capture.depth_from_thermal, &placed, &trace, normals), &placed, &objects.plane, &trace)
-        };
+        let rays = irmirror_recon::pipeline::reflected_rays(&capture, &objects, &cfg);
         for _ in 0..RANDOM_DRAWS {
             let latent: Vec<f64> = (0..irmirror_body::prior::LATENT).map(|_| StandardNormal.sample(&mut rng)).collect();
             let st = HumanState { translation: sim.body.joints[0], rotation: truth_root, latent };
             let body = posed_body(&model, &prior, &st)?;
             let mask = fitted_mask(&model, &rays, &body);
-            random.push(evaluate(&sim, &body, &mask, &objects)?);
+            result.random.push(evaluate(&sim, &body, &mask, &objects)?);
         }
-        results.push(CaptureResult {
-            id: id.clone(),
-            category: category.to_string(),
-            seed: *seed,
-            netd_mk: *netd,
-            thermal_width: capture.thermal_camera.width,
-            reflection_pixels: sim.report.reflection_pixels,
-            person_distance_m: sim.body.joints[0].norm(),
-            objects_time_s,
-            object_chamfer_mm2,
-            variants,
-            random,
-        });
+        results.push(result);
     }
     bar.finish_and_clear();
     std::fs::remove_dir_all(&scratch).ok();

@@ -1,7 +1,9 @@
 //! Figures of one reconstructed body against the simulator's truth (DESIGN.md §5), shared by
 //! `demo` and `eval`.
 
+use crate::result::{Drawn, render_view};
 use anyhow::Result;
+use irmirror_geom::Rigid3;
 use irmirror_body::{BodyModel, PosedBody};
 use irmirror_geom::nalgebra::Vector3;
 use irmirror_recon::metrics::{mpjpe, normalised_distance, pa_mpjpe};
@@ -40,11 +42,29 @@ pub fn fitted_mask(model: &BodyModel, rays: &ReflectedRays<f64>, body: &PosedBod
     hard_mask(rays, &bvh, &body.vertices, &model.asset.faces)
 }
 
+/// The simulator's evaluation camera relative to the depth camera.
+pub fn depth_from_third(sim: &Simulation) -> Result<Rigid3<f64>> {
+    Ok(sim.scene.depth_camera.world_from_camera.to_rigid()?.inverse() * sim.scene.third_camera.world_from_camera.to_rigid()?)
+}
+
+/// The third camera's view: fitted body (orange), true body (green), fitted objects.
+pub fn third_view(sim: &Simulation, model: &BodyModel, body: &PosedBody<f64>, objects: &Objects) -> Result<image::RgbImage> {
+    let truth: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
+    Ok(render_view(
+        &sim.scene.third_camera.intrinsics,
+        &depth_from_third(sim)?,
+        &[
+            Drawn { vertices: &body.vertices, triangles: &model.asset.faces, colour: [240, 150, 60] },
+            Drawn { vertices: &truth, triangles: &sim.body.mesh.triangles, colour: [80, 200, 90] },
+        ],
+        &objects.placed(),
+    ))
+}
+
 /// Evaluates `body` (with its reflection `mask`) and the fitted `objects` against `sim`.
 pub fn evaluate(sim: &Simulation, body: &PosedBody<f64>, mask: &[bool], objects: &Objects) -> Result<Evaluation> {
     let third = &sim.scene.third_camera;
-    let depth_from_third = sim.scene.depth_camera.world_from_camera.to_rigid()?.inverse() * third.world_from_camera.to_rigid()?;
-    let third_from_depth = depth_from_third.inverse();
+    let third_from_depth = depth_from_third(sim)?.inverse();
     let v3 = |p: &Vector3<f64>| vec![p.x, p.y, p.z];
     let (mut kp_fit, mut kp_true) = (Vec::new(), Vec::new());
     for (k, truth) in sim.third_view.1.iter().enumerate() {

@@ -132,14 +132,20 @@ pub fn reconstruct(capture: &Capture, model: &BodyModel, prior: &PosePrior, cfg:
     reconstruct_human(capture, pre, objects, model, prior, cfg, seed, progress)
 }
 
+/// The unblocked reflected rays of every thermal pixel on the fitted objects (after ablations).
+pub fn reflected_rays(capture: &Capture, objects: &Objects, cfg: &ReconConfig) -> ReflectedRays<f64> {
+    let (trace, normals) = cfg.rays_settings();
+    let placed = objects.placed();
+    let all_rays = reflect_camera(&capture.thermal_camera, &capture.depth_from_thermal, &placed, &trace, normals);
+    unblocked(&all_rays, &placed, &objects.plane, &trace)
+}
+
 /// Stage 2 (reflected rays, then the person) on given stage 0–1 results: the evaluation runs
 /// the ablations of one capture from the same objects.
 pub fn reconstruct_human(capture: &Capture, pre: Preprocessed, objects: Objects, model: &BodyModel, prior: &PosePrior, cfg: &ReconConfig, seed: u64, progress: &dyn Progress) -> Result<Reconstruction, ReconError> {
     progress.stage("reflected rays", 0);
-    let (trace, normals) = cfg.rays_settings();
+    let rays = reflected_rays(capture, &objects, cfg);
     let placed = objects.placed();
-    let all_rays = reflect_camera(&capture.thermal_camera, &capture.depth_from_thermal, &placed, &trace, normals);
-    let rays = unblocked(&all_rays, &placed, &objects.plane, &trace);
     let centre = placed.iter().fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation) / placed.len().max(1) as f64;
     let problem = HumanProblem { model, prior, rays: &rays, mask: &pre.mask, up: objects.plane.n(), objects_centre: centre };
     let hcfg = cfg.human_settings();

@@ -288,46 +288,6 @@ impl FamilyShape {
         }
     }
 
-    /// Signed distance in raw units.
-    pub fn raw_distance(&self, p: &Vector3<f64>) -> f64 {
-        let rho = Vector2::new(p.x, p.z).norm();
-        match self {
-            FamilyShape::Bowl(b) => {
-                let q = Vector2::new(rho, p.y);
-                let shell = polyline_distance(q, &b.profile()) - 0.5 * b.wall;
-                if b.foot_height > 0.0 {
-                    let foot = sd_box2(q, Vector2::new(b.foot_radius, -0.25 * b.wall - 0.5 * b.foot_height), Vector2::new(0.4 * b.wall, 0.5 * b.foot_height + 0.25 * b.wall)) - 0.1 * b.wall;
-                    smin(shell, foot, 0.04)
-                } else {
-                    shell
-                }
-            }
-            FamilyShape::Mug(m) => {
-                let cup = polygon_distance(Vector2::new(rho, p.y), &m.section()) - 0.01;
-                let curve = m.handle_curve();
-                let d2 = polyline_distance(Vector2::new(p.x, p.y), &curve);
-                let x_wall = curve[0].x;
-                let handle = ((d2 * d2 + p.z * p.z).sqrt() - m.handle_tube).max(x_wall - p.x);
-                smin(cup, handle, 0.05)
-            }
-            FamilyShape::Car(c) => {
-                let d2 = polygon_distance(Vector2::new(p.x, p.y), &c.profile());
-                let r_edge = 0.08;
-                let w = Vector2::new(d2 + r_edge, p.z.abs() - c.half_width + r_edge);
-                let mut body = w.x.max(w.y).min(0.0) + Vector2::new(w.x.max(0.0), w.y.max(0.0)).norm() - r_edge;
-                for xw in [c.wheelbase, -c.wheelbase] {
-                    let centre = Vector2::new(xw, c.wheel);
-                    let arch = ((Vector2::new(p.x, p.y) - centre).norm() - (c.wheel + 0.03)).max(c.half_width - 0.14 - p.z.abs());
-                    body = body.max(-arch);
-                    let zc = c.half_width - 0.08;
-                    let wheel = sd_box2(Vector2::new((Vector2::new(p.x, p.y) - centre).norm(), p.z.abs()), Vector2::new(0.0, zc), Vector2::new(c.wheel - 0.02, 0.06)) - 0.02;
-                    body = body.min(wheel);
-                }
-                body
-            }
-        }
-    }
-
     /// Raw-unit bounding box `(lo, hi)` of the surface.
     pub fn raw_bounds(&self) -> (Vector3<f64>, Vector3<f64>) {
         match self {
@@ -350,30 +310,101 @@ impl FamilyShape {
         ((lo + hi) / 2.0, (hi - lo).norm() / 2.0 / NORMALISED_RADIUS)
     }
 
-    /// Signed distance in the normalised object frame.
+    /// Signed distance in the normalised object frame. Builds the curves on every call: for many
+    /// queries use [`FamilyShape::prepare`].
     pub fn distance(&self, q: &Vector3<f64>) -> f64 {
-        let (c, k) = self.normalisation();
-        self.raw_distance(&(c + q * k)) / k
+        self.prepare().distance(q)
+    }
+
+    /// The shape with its curves and normalisation computed once.
+    pub fn prepare(&self) -> PreparedShape {
+        let (centre, k) = self.normalisation();
+        let (curve, polygon) = match self {
+            FamilyShape::Bowl(b) => (b.profile(), Vec::new()),
+            FamilyShape::Mug(m) => (m.handle_curve(), m.section()),
+            FamilyShape::Car(c) => (Vec::new(), c.profile()),
+        };
+        PreparedShape { shape: *self, centre, k, curve, polygon }
     }
 
     /// The surface as a watertight, outward-oriented mesh in the normalised frame: marching
-    /// tetrahedra over the bounding box with `resolution` cells along the longest side.
+    /// tetrahedra over a cube around the padded bounding box, `resolution` cells per side.
     pub fn mesh(&self, resolution: usize) -> TriMesh {
-        let (c, k) = self.normalisation();
+        let prepared = self.prepare();
+        let (c, k) = (prepared.centre, prepared.k);
         let (lo, hi) = self.raw_bounds();
         let pad = Vector3::repeat(0.03 * k.max(1.0));
+        // (Kept in this exact arithmetic: the shipped priors were trained on these grids.)
         let (lo, hi) = ((lo - c) / k - pad / k, (hi - c) / k + pad / k);
         let cell = (hi - lo).max() / resolution as f64;
-        // Marching tetrahedra takes one cell count; use the longest side's and a cubic box.
-        let centre = (lo + hi) / 2.0;
         let half = Vector3::repeat(cell * resolution as f64 / 2.0);
-        irmirror_geom::isosurface::isosurface(|q| self.distance(q), centre - half, centre + half, resolution)
+        let centre = (lo + hi) / 2.0;
+        irmirror_geom::isosurface::isosurface(|q| prepared.distance(q), centre - half, centre + half, resolution)
     }
 }
 
-impl Sdf for FamilyShape {
+/// A family member ready for many distance queries (meshing evaluates millions).
+#[derive(Clone, Debug)]
+pub struct PreparedShape {
+    shape: FamilyShape,
+    centre: Vector3<f64>,
+    k: f64,
+    /// Bowl: the profile; mug: the handle's centre line.
+    curve: Vec<Vector2<f64>>,
+    /// Mug: the cup's cross-section; car: the side profile.
+    polygon: Vec<Vector2<f64>>,
+}
+
+impl PreparedShape {
+    /// Signed distance in raw units.
+    pub fn raw_distance(&self, p: &Vector3<f64>) -> f64 {
+        let rho = Vector2::new(p.x, p.z).norm();
+        match &self.shape {
+            FamilyShape::Bowl(b) => {
+                let q = Vector2::new(rho, p.y);
+                let shell = polyline_distance(q, &self.curve) - 0.5 * b.wall;
+                if b.foot_height > 0.0 {
+                    let foot = sd_box2(q, Vector2::new(b.foot_radius, -0.25 * b.wall - 0.5 * b.foot_height), Vector2::new(0.4 * b.wall, 0.5 * b.foot_height + 0.25 * b.wall)) - 0.1 * b.wall;
+                    smin(shell, foot, 0.04)
+                } else {
+                    shell
+                }
+            }
+            FamilyShape::Mug(m) => {
+                let cup = polygon_distance(Vector2::new(rho, p.y), &self.polygon) - 0.01;
+                let d2 = polyline_distance(Vector2::new(p.x, p.y), &self.curve);
+                let x_wall = self.curve[0].x;
+                let handle = ((d2 * d2 + p.z * p.z).sqrt() - m.handle_tube).max(x_wall - p.x);
+                smin(cup, handle, 0.05)
+            }
+            FamilyShape::Car(c) => {
+                let d2 = polygon_distance(Vector2::new(p.x, p.y), &self.polygon);
+                let r_edge = 0.08;
+                let w = Vector2::new(d2 + r_edge, p.z.abs() - c.half_width + r_edge);
+                let mut body = w.x.max(w.y).min(0.0) + Vector2::new(w.x.max(0.0), w.y.max(0.0)).norm() - r_edge;
+                for xw in [c.wheelbase, -c.wheelbase] {
+                    let centre = Vector2::new(xw, c.wheel);
+                    let arch = ((Vector2::new(p.x, p.y) - centre).norm() - (c.wheel + 0.03)).max(c.half_width - 0.14 - p.z.abs());
+                    body = body.max(-arch);
+                    let zc = c.half_width - 0.08;
+                    let wheel = sd_box2(Vector2::new((Vector2::new(p.x, p.y) - centre).norm(), p.z.abs()), Vector2::new(0.0, zc), Vector2::new(c.wheel - 0.02, 0.06)) - 0.02;
+                    body = body.min(wheel);
+                }
+                body
+            }
+        }
+    }
+
+
+    /// Signed distance in the normalised object frame.
+    pub fn distance(&self, q: &Vector3<f64>) -> f64 {
+        self.raw_distance(&(self.centre + q * self.k)) / self.k
+    }
+}
+
+impl Sdf for PreparedShape {
     fn distance(&self, p: &Vector3<f64>) -> f64 {
-        FamilyShape::distance(self, p)
+        PreparedShape::distance(self, p)
     }
     fn bounding_radius(&self) -> f64 {
         NORMALISED_RADIUS + 0.05

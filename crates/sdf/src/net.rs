@@ -263,83 +263,65 @@ impl LatentSdf {
     }
 
     /// Signed distance and its gradient with respect to the point (normalised frame).
+    /// Allocation-free: activations live on the stack (width ≤ 512, checked at load).
     pub fn value_grad(&self, p: &Vector3<f64>) -> (f64, Vector3<f64>) {
         let (l, w) = (self.net.latent_dim, self.net.width);
         let wts = &self.net.weights;
-        let mut a0 = [0.0f64; 512];
-        let mut d0 = [0.0f64; 512];
-        let mut h0 = [0.0f64; 512];
-        let mut d1 = [0.0f64; 512];
-        let mut h1 = [0.0f64; 512];
-        let mut d2 = [0.0f64; 512];
-        let mut h2 = [0.0f64; 512];
-        let mut d3 = [0.0f64; 512];
-        let mut h3 = [0.0f64; 512];
-        let n0 = l + 3;
+        let (n0, n2) = (l + 3, w + l + 3);
+        // Only the p columns of layers 0 and 2 remain: the latent is folded into the biases.
+        let p_cols = |k: usize, n_in: usize, o: usize| {
+            let r = &wts[k].0[o * n_in + n_in - 3..(o + 1) * n_in];
+            Vector3::new(r[0], r[1], r[2])
+        };
+        let (mut h0, mut d0, mut h1, mut d1) = ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
+        let (mut h2, mut d2, mut h3, mut d3) = ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
         for o in 0..w {
-            let r = &wts[0].0[o * n0 + l..o * n0 + l + 3];
-            a0[o] = self.bias0[o] + r[0] * p.x + r[1] * p.y + r[2] * p.z;
-            (h0[o], d0[o]) = silu(a0[o]);
+            (h0[o], d0[o]) = silu(self.bias0[o] + p_cols(0, n0, o).dot(p));
         }
+        dense_silu(&wts[1].0, w, &wts[1].1, &h0[..w], &mut h1[..w], &mut d1[..w]);
         for o in 0..w {
-            let row = &wts[1].0[o * w..(o + 1) * w];
-            let a = wts[1].1[o] + row.iter().zip(&h0[..w]).map(|(x, y)| x * y).sum::<f64>();
-            (h1[o], d1[o]) = silu(a);
+            (h2[o], d2[o]) = silu(self.bias2[o] + dot(&wts[2].0[o * n2..o * n2 + w], &h1[..w]) + p_cols(2, n2, o).dot(p));
         }
-        let n2 = w + l + 3;
-        for o in 0..w {
-            let row = &wts[2].0[o * n2..(o + 1) * n2];
-            let a = self.bias2[o] + row[..w].iter().zip(&h1[..w]).map(|(x, y)| x * y).sum::<f64>() + row[w + l] * p.x + row[w + l + 1] * p.y + row[w + l + 2] * p.z;
-            (h2[o], d2[o]) = silu(a);
-        }
-        for o in 0..w {
-            let row = &wts[3].0[o * w..(o + 1) * w];
-            let a = wts[3].1[o] + row.iter().zip(&h2[..w]).map(|(x, y)| x * y).sum::<f64>();
-            (h3[o], d3[o]) = silu(a);
-        }
-        let f = wts[4].1[0] + wts[4].0.iter().zip(&h3[..w]).map(|(x, y)| x * y).sum::<f64>();
-        // Reverse pass (reusing h* as gradient buffers).
-        let g3 = &mut h3;
+        dense_silu(&wts[3].0, w, &wts[3].1, &h2[..w], &mut h3[..w], &mut d3[..w]);
+        let f = wts[4].1[0] + dot(&wts[4].0, &h3[..w]);
+        // Reverse pass, reusing the activation buffers for gradients of the pre-activations.
+        let g3 = &mut h3[..w];
         for o in 0..w {
             g3[o] = wts[4].0[o] * d3[o];
         }
-        let g2 = &mut h2;
-        g2[..w].fill(0.0);
-        for o in 0..w {
-            let row = &wts[3].0[o * w..(o + 1) * w];
-            for i in 0..w {
-                g2[i] += row[i] * g3[o];
-            }
-        }
+        back_silu(&wts[3].0, w, g3, &d2[..w], &mut h2[..w]);
+        back_silu(&wts[2].0, n2, &h2[..w], &d1[..w], &mut h1[..w]);
+        back_silu(&wts[1].0, w, &h1[..w], &d0[..w], &mut h0[..w]);
         let mut gp = Vector3::zeros();
-        for i in 0..w {
-            g2[i] *= d2[i];
-        }
-        let g1 = &mut h1;
-        g1[..w].fill(0.0);
         for o in 0..w {
-            let row = &wts[2].0[o * n2..(o + 1) * n2];
-            for i in 0..w {
-                g1[i] += row[i] * g2[o];
-            }
-            gp += Vector3::new(row[w + l], row[w + l + 1], row[w + l + 2]) * g2[o];
-        }
-        for i in 0..w {
-            g1[i] *= d1[i];
-        }
-        let g0 = &mut h0;
-        g0[..w].fill(0.0);
-        for o in 0..w {
-            let row = &wts[1].0[o * w..(o + 1) * w];
-            for i in 0..w {
-                g0[i] += row[i] * g1[o];
-            }
-        }
-        for o in 0..w {
-            let r = &wts[0].0[o * n0 + l..o * n0 + l + 3];
-            gp += Vector3::new(r[0], r[1], r[2]) * (g0[o] * d0[o]);
+            gp += p_cols(2, n2, o) * h2[o] + p_cols(0, n0, o) * h0[o];
         }
         (f, gp)
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// `h = silu(W x + b)` and `d = silu'(W x + b)`; `W` row-major with rows of `n_in`, of which the
+/// first `x.len()` columns are used.
+fn dense_silu(wt: &[f64], n_in: usize, b: &[f64], x: &[f64], h: &mut [f64], d: &mut [f64]) {
+    for o in 0..h.len() {
+        (h[o], d[o]) = silu(b[o] + dot(&wt[o * n_in..o * n_in + x.len()], x));
+    }
+}
+
+/// `g_in = d_in ⊙ (Wᵀ g_out)` over the first `g_in.len()` input columns.
+fn back_silu(wt: &[f64], n_in: usize, g_out: &[f64], d_in: &[f64], g_in: &mut [f64]) {
+    g_in.fill(0.0);
+    for (o, go) in g_out.iter().enumerate() {
+        for (gi, wi) in g_in.iter_mut().zip(&wt[o * n_in..]) {
+            *gi += wi * go;
+        }
+    }
+    for (gi, di) in g_in.iter_mut().zip(d_in) {
+        *gi *= di;
     }
 }
 

@@ -133,7 +133,7 @@ pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, meta
     let per_batch = cfg.shapes_per_batch.min(n).max(1);
     let batch = per_batch * cfg.points_per_shape;
     let t0 = std::time::Instant::now();
-    let mut recent = Vec::new();
+    let mut recent = std::collections::VecDeque::with_capacity(101);
     let (mut pts, mut tgt, mut idx) = (Vec::with_capacity(batch * 3), Vec::with_capacity(batch), Vec::with_capacity(batch));
     let mut order: Vec<usize> = (0..n).collect();
     for step in 0..cfg.steps {
@@ -175,9 +175,9 @@ pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, meta
         if !l1v.is_finite() {
             return Err(SdfError::Invalid(format!("training diverged at step {step} (loss {l1v})")));
         }
-        recent.push(l1v);
+        recent.push_back(l1v);
         if recent.len() > 100 {
-            recent.remove(0);
+            recent.pop_front();
         }
         if step % 25 == 0 || step + 1 == cfg.steps {
             progress(step, l1v);
