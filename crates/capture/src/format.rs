@@ -57,6 +57,11 @@ pub struct DepthSpec {
     pub file: String,
     /// Metres per count (0.001 for millimetres). 0 counts = no measurement.
     pub units_m: f64,
+    /// Optional "up" (against gravity) in the depth-camera frame, from the camera's IMU (Azure
+    /// Kinect, RealSense D435i/D455 and phones report it); any length, normalised on load.
+    /// Stage 1 uses it when the depth image shows no support plane (the side of a car).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<[f64; 3]>,
 }
 
 /// Units of the thermal images.

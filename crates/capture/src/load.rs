@@ -5,6 +5,7 @@ use crate::image_io::{Image, read_float, read_gray16_png, read_mask, read_rgb};
 use crate::planck::{ZERO_C_K, band_radiance, temperature_of};
 use crate::CaptureError;
 use irmirror_geom::{PinholeCamera, Rigid3};
+use nalgebra::Vector3;
 use std::path::{Component, Path, PathBuf};
 
 /// Plausible scene temperatures, K: outside this the units are almost certainly wrong.
@@ -42,6 +43,8 @@ pub struct Capture {
     pub objects: Vec<CapturedObject>,
     /// Extra calibrated cameras: name, intrinsics, `depth_from_camera`.
     pub extra_cameras: Vec<(String, PinholeCamera, Rigid3<f64>)>,
+    /// Unit "up" (against gravity) in the depth frame, when the capture gives one (IMU).
+    pub up: Option<Vector3<f64>>,
 }
 
 impl Capture {
@@ -61,6 +64,16 @@ impl Capture {
         if !(file.depth.units_m.is_finite() && file.depth.units_m > 0.0) {
             return Err(field("depth.units_m", format!("{} must be a positive number of metres per count", file.depth.units_m)));
         }
+        let up = match file.depth.up {
+            Some(u) => {
+                let v = Vector3::from(u);
+                if !(v.iter().all(|x| x.is_finite()) && v.norm() > 1e-9) {
+                    return Err(field("depth.up", format!("{u:?} must be a finite, non-zero vector")));
+                }
+                Some(v.normalize())
+            }
+            None => None,
+        };
         if let ThermalUnits::CountsLinear { gain, offset } = file.thermal.units
             && !(gain.is_finite() && gain > 0.0 && offset.is_finite())
         {
@@ -167,6 +180,7 @@ impl Capture {
             thermal_background_k,
             objects,
             extra_cameras,
+            up,
             file,
         })
     }

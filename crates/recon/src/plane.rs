@@ -24,7 +24,12 @@ pub struct Plane {
 impl Plane {
     /// The stand-in when the depth image shows no support plane: up = the camera's −Y.
     pub fn camera_up() -> Self {
-        Self { normal: [0.0, -1.0, 0.0], offset_m: 0.0, inlier_fraction: 0.0, found: false }
+        Self::up_only(-Vector3::y())
+    }
+    /// The stand-in when the depth image shows no support plane but the capture knows "up"
+    /// (IMU): the direction only, no height.
+    pub fn up_only(up: Vector3<f64>) -> Self {
+        Self { normal: up.normalize().into(), offset_m: 0.0, inlier_fraction: 0.0, found: false }
     }
 }
 
@@ -49,24 +54,33 @@ pub struct PlaneConfig {
     pub tolerance_m: f64,
     /// Range-proportional part of the band.
     pub tolerance_rel: f64,
-    /// Planes whose normal makes more than this angle with the camera's up (−Y) are rejected, so
-    /// a wall or a car's flank is not taken for the floor (degrees).
+    /// Planes whose normal makes more than this angle with the camera's −Y are rejected, so a
+    /// wall or a car's flank is not taken for the floor (degrees; wide, since the camera's
+    /// pitch is unknown).
     pub max_tilt_deg: f64,
+    /// The same gate about the capture's IMU "up", when it has one (degrees; tight, since up
+    /// is then known).
+    pub max_tilt_imu_deg: f64,
 }
 
 impl Default for PlaneConfig {
     fn default() -> Self {
-        Self { iterations: 300, tolerance_m: 0.006, tolerance_rel: 0.004, max_tilt_deg: 75.0 }
+        Self { iterations: 300, tolerance_m: 0.006, tolerance_rel: 0.004, max_tilt_deg: 75.0, max_tilt_imu_deg: 20.0 }
     }
 }
 
-/// Fits the dominant near-horizontal plane to `points` (depth frame). `None` if there are fewer
-/// than 3 points or no hypothesis passes the tilt test.
-pub fn fit_plane(points: &[Vector3<f64>], cfg: &PlaneConfig, rng: &mut impl Rng) -> Option<Plane> {
+/// Fits the dominant near-horizontal plane to `points` (depth frame): its normal within
+/// `max_tilt_imu_deg` of `imu_up` when given, else within `max_tilt_deg` of the camera's −Y.
+/// `None` if there are fewer than 3 points or no hypothesis passes the tilt test.
+pub fn fit_plane(points: &[Vector3<f64>], imu_up: Option<&Vector3<f64>>, cfg: &PlaneConfig, rng: &mut impl Rng) -> Option<Plane> {
     if points.len() < 3 {
         return None;
     }
-    let min_up = cfg.max_tilt_deg.to_radians().cos();
+    let (up, max_tilt) = match imu_up {
+        Some(u) => (u.normalize(), cfg.max_tilt_imu_deg),
+        None => (-Vector3::y(), cfg.max_tilt_deg),
+    };
+    let min_up = max_tilt.to_radians().cos();
     let band = |p: &Vector3<f64>| cfg.tolerance_m + cfg.tolerance_rel * p.z.abs();
     let orient = |n: Vector3<f64>, c: f64| if c > 0.0 { (-n, -c) } else { (n, c) };
     let mut best: Option<(usize, Vector3<f64>, f64)> = None;
@@ -75,7 +89,7 @@ pub fn fit_plane(points: &[Vector3<f64>], cfg: &PlaneConfig, rng: &mut impl Rng)
         let Some(n) = (b - a).cross(&(c - a)).try_normalize(1e-12) else { continue };
         // Orient towards the camera (origin): n · (0 − a) > 0 ⇔ offset n·a < 0.
         let (n, off) = orient(n, n.dot(&a));
-        if -n.y < min_up {
+        if n.dot(&up) < min_up {
             continue;
         }
         let count = points.iter().filter(|p| (n.dot(p) - off).abs() < band(p)).count();
@@ -116,7 +130,7 @@ mod tests {
         let (u, v) = (n.cross(&Vector3::x()).normalize(), n.cross(&n.cross(&Vector3::x())).normalize());
         let mut pts: Vec<Vector3<f64>> = (0..600).map(|_| p0 + u * rng.random_range(-0.4..0.4) + v * rng.random_range(-0.4..0.4) + n * rng.random_range(-0.002..0.002)).collect();
         pts.extend((0..300).map(|_| Vector3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(0.5..1.5))));
-        let plane = fit_plane(&pts, &PlaneConfig::default(), &mut rng).expect("plane");
+        let plane = fit_plane(&pts, None, &PlaneConfig::default(), &mut rng).expect("plane");
         assert!(plane.n().dot(&n) > 0.999, "normal {:?}", plane.normal);
         assert!((plane.height(&p0)).abs() < 2e-3);
         assert!(plane.inlier_fraction > 0.6 && plane.inlier_fraction < 0.75, "{}", plane.inlier_fraction);
@@ -127,6 +141,22 @@ mod tests {
         let mut rng = irmirror_geom::rng::seeded(2, 0);
         // A fronto-parallel wall at z = 2 only.
         let pts: Vec<Vector3<f64>> = (0..200).map(|_| Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 2.0)).collect();
-        assert!(fit_plane(&pts, &PlaneConfig::default(), &mut rng).is_none());
+        assert!(fit_plane(&pts, None, &PlaneConfig::default(), &mut rng).is_none());
+    }
+
+    /// With the IMU's up, a wall 40° from horizontal (the camera looks down 50°) is not a
+    /// floor, while the horizontal floor in the same view is found.
+    #[test]
+    fn the_imu_gate_is_tight() {
+        let mut rng = irmirror_geom::rng::seeded(3, 0);
+        let pitch = 50f64.to_radians();
+        let up = Vector3::new(0.0, -pitch.cos(), -pitch.sin());
+        let wall: Vec<Vector3<f64>> = (0..200).map(|_| Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 2.0)).collect();
+        assert!(fit_plane(&wall, Some(&up), &PlaneConfig::default(), &mut rng).is_none());
+        // The floor 1.2 m below the camera: points p with up · p = −1.2.
+        let (a, b) = (Vector3::x(), up.cross(&Vector3::x()).normalize());
+        let floor: Vec<Vector3<f64>> = (0..200).map(|_| -up * 1.2 + a * rng.random_range(-1.0..1.0) + b * rng.random_range(-1.0..1.0)).collect();
+        let plane = fit_plane(&floor, Some(&up), &PlaneConfig::default(), &mut rng).expect("the floor");
+        assert!(plane.n().dot(&up) > 0.9999 && (plane.offset_m + 1.2).abs() < 1e-6, "{plane:?}");
     }
 }

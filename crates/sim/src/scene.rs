@@ -147,18 +147,21 @@ pub struct Sensor {
     pub depth_grazing_cos: f64,
     /// Probability of a hole at a depth discontinuity (> 3 cm between neighbours).
     pub depth_edge_hole: f64,
+    /// Error of the IMU's "up" written into the capture, degrees (σ per tilt axis; consumer
+    /// RGB-D IMUs after calibration ≈ 0.5°).
+    pub imu_up_noise_deg: f64,
 }
 
 impl Default for Sensor {
     fn default() -> Self {
-        Self { netd_mk: 50.0, blur_px: 0.5, supersample: 2, bits: 14, depth_noise_per_m2: 1.5e-3, depth_grazing_cos: 0.1, depth_edge_hole: 0.5 }
+        Self { netd_mk: 50.0, blur_px: 0.5, supersample: 2, bits: 14, depth_noise_per_m2: 1.5e-3, depth_grazing_cos: 0.1, depth_edge_hole: 0.5, imu_up_noise_deg: 0.5 }
     }
 }
 
 impl Sensor {
     /// An ideal sensor (no noise, blur, dropouts; one ray per pixel) for tests.
     pub fn ideal() -> Self {
-        Self { netd_mk: 0.0, blur_px: 0.0, supersample: 1, bits: 16, depth_noise_per_m2: 0.0, depth_grazing_cos: 0.0, depth_edge_hole: 0.0 }
+        Self { netd_mk: 0.0, blur_px: 0.0, supersample: 1, bits: 16, depth_noise_per_m2: 0.0, depth_grazing_cos: 0.0, depth_edge_hole: 0.0, imu_up_noise_deg: 0.0 }
     }
 }
 

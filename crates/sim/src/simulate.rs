@@ -55,6 +55,8 @@ pub struct Simulation {
     pub object_meshes: Vec<TriMesh>,
     /// Object placements, depth frame.
     pub object_poses: Vec<Similarity3<f64>>,
+    /// The IMU's unit "up" in the depth frame (world +Z with the sensor's tilt error).
+    pub imu_up: Vector3<f64>,
     /// Shaded view of the person from the third camera, and its keypoints there (pixels).
     pub third_view: (image::RgbImage, Vec<Option<(f64, f64)>>),
     /// Figures.
@@ -158,6 +160,19 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         })
         .collect();
     let object_poses = with.objects.iter().map(|o| o.depth_from_object).collect();
+    let imu_up = {
+        use rand_distr::{Distribution, Normal};
+        let up = depth_from_world.rotation * Vector3::z();
+        let mut rng_u = irmirror_geom::rng::seeded(seed, 4);
+        let sigma = s.imu_up_noise_deg.max(0.0).to_radians();
+        let tilt = if sigma > 0.0 {
+            let n = Normal::new(0.0, sigma).expect("σ > 0");
+            Vector3::new(n.sample(&mut rng_u), n.sample(&mut rng_u), n.sample(&mut rng_u))
+        } else {
+            Vector3::zeros()
+        };
+        irmirror_geom::rotation::axis_angle_to_matrix(&(tilt - up * up.dot(&tilt))) * up
+    };
 
     // Third view: shaded person (and scene) with the keypoints projected.
     let third_cam = scene.third_camera.intrinsics;
@@ -200,6 +215,7 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         masks,
         object_meshes,
         object_poses,
+        imu_up,
         third_view: (third_img, kp2d),
         report,
     })
@@ -231,7 +247,7 @@ impl Simulation {
         let capture = CaptureFile {
             format: FORMAT.into(),
             depth_camera: self.scene.depth_camera.intrinsics,
-            depth: DepthSpec { file: "depth.png".into(), units_m: 0.001 },
+            depth: DepthSpec { file: "depth.png".into(), units_m: 0.001, up: Some(self.imu_up.into()) },
             thermal_camera: ThermalCameraSpec { intrinsics: self.scene.thermal_camera.intrinsics, depth_from_thermal: self.scene.thermal_camera.depth_from_thermal.clone() },
             thermal: ThermalSpec { file: "thermal.png".into(), units: ThermalUnits::CountsLinear { gain, offset }, background: vec!["thermal_background.png".into()] },
             rgb: Some(RgbSpec { file: "rgb.png".into() }),

@@ -127,6 +127,7 @@ fn broken_captures_give_clear_errors() {
         ("empty mask", Box::new(|d| image::GrayImage::new(80, 60).save(d.join("masks/object_0.png")).unwrap()), "empty"),
         ("mask outside the capture", Box::new(|d| edit_toml(d, |t| t.replace("masks/object_0.png", "../object_0.png"))), "inside the capture directory"),
         ("zero depth units", Box::new(|d| edit_toml(d, |t| t.replace("units_m = 0.001", "units_m = 0.0"))), "units_m"),
+        ("zero IMU up", Box::new(|d| edit_toml(d, |t| t.lines().map(|l| if l.starts_with("up = ") { "up = [0.0, 0.0, 0.0]" } else { l }).collect::<Vec<_>>().join("\n"))), "depth.up"),
         ("negative gain", Box::new(|d| edit_toml(d, |t| t.replacen("gain = ", "gain = -", 1))), "gain"),
         ("no objects", Box::new(|d| edit_toml(d, |t| t.split("[[object]]").next().unwrap().to_string())), "no objects"),
         ("background missing", Box::new(|d| std::fs::remove_file(d.join("thermal_background.png")).unwrap()), "thermal_background.png"),
