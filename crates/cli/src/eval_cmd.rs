@@ -10,7 +10,7 @@
 use crate::evaluate::{Evaluation, evaluate, fitted_mask};
 use crate::output::{Staging, save_png, write_text};
 use crate::result::posed_body;
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
@@ -184,17 +184,37 @@ fn chamfer_mm2(a: &irmirror_geom::TriMesh, b: &irmirror_geom::TriMesh) -> f64 {
     irmirror_sdf::quality::chamfer(a, b, 5000, 0) * 1e6
 }
 
-/// Runs the benchmark into `out`; `limit` keeps the first captures of each type only.
-pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result<()> {
+/// Which part of a set to run.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    /// Only the first N captures of each object type.
+    pub limit: Option<usize>,
+    /// Only this object type.
+    pub category: Option<String>,
+    /// Only the full model.
+    pub full_only: bool,
+}
+
+/// Runs the benchmark (the `selection` of it) into `out`.
+pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Result<()> {
+    if let Some(c) = &selection.category
+        && !CATEGORIES.contains(&c.as_str())
+    {
+        bail!("--category {c}: the benchmark has {}", CATEGORIES.join(", "));
+    }
     let model = BodyModel::builtin()?;
     let prior = PosePrior::builtin(candle_core::DType::F64)?;
     let stage = Staging::new(out, "table.md")?;
     let mut list = captures(set);
-    if let Some(l) = limit {
+    if let Some(l) = selection.limit {
         let per = list.len() / CATEGORIES.len();
         list = list.into_iter().enumerate().filter(|(k, _)| k % per < l).map(|(_, c)| c).collect();
     }
-    let bar = if progress { indicatif::ProgressBar::new((list.len() * VARIANTS.len()) as u64) } else { indicatif::ProgressBar::hidden() };
+    if let Some(c) = &selection.category {
+        list.retain(|x| x.1 == c.as_str());
+    }
+    let variants: Vec<(&str, Option<Ablation>)> = VARIANTS.iter().copied().filter(|v| !selection.full_only || v.1.is_none()).collect();
+    let bar = if progress { indicatif::ProgressBar::new((list.len() * variants.len()) as u64) } else { indicatif::ProgressBar::hidden() };
     bar.set_style(indicatif::ProgressStyle::with_template("eval {bar:40} {pos}/{len} runs {msg} {elapsed}/{eta}").expect("valid template"));
     let scratch = stage.path("scratch");
     let mut results = Vec::new();
@@ -238,8 +258,8 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
             Err(e) => {
                 tracing::warn!("{id}: stage 1 failed: {e}");
                 let failed = VariantResult { eval: None, error: Some(format!("stage 1: {e}")), time_s: 0.0 };
-                result.variants = VARIANTS.iter().map(|(n, _)| (n.to_string(), failed.clone())).collect();
-                bar.inc(VARIANTS.len() as u64);
+                result.variants = variants.iter().map(|(n, _)| (n.to_string(), failed.clone())).collect();
+                bar.inc(variants.len() as u64);
                 results.push(result);
                 continue;
             }
@@ -247,7 +267,7 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
         result.object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| chamfer_mm2(&crate::result::object_mesh(o), m)).collect();
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs)?;
-        for (name, ablation) in VARIANTS {
+        for &(name, ablation) in &variants {
             let cfg = ReconConfig { ablate: ablation.into_iter().collect(), ..ReconConfig::default() };
             let t0 = Instant::now();
             let rec = match reconstruct_human(&capture, pre.clone(), objects.clone(), &model, &prior, &cfg, *seed, &Silent) {
@@ -274,7 +294,7 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
         // Random baseline: true root position and orientation, random pose latents.
         let mut rng = irmirror_geom::rng::seeded(*seed, 99);
         let truth_root = sim.body.depth_from_anny.rotation * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0]));
-        let rays = irmirror_recon::pipeline::reflected_rays(&capture, &objects, &cfg);
+        let rays = irmirror_recon::pipeline::reflected_rays(&capture, &objects, &pre.mask, &cfg);
         for _ in 0..RANDOM_DRAWS {
             let latent: Vec<f64> = (0..irmirror_body::prior::LATENT).map(|_| StandardNormal.sample(&mut rng)).collect();
             let st = HumanState { translation: sim.body.joints[0], rotation: truth_root, latent };
@@ -291,7 +311,7 @@ pub fn run(set: Set, out: &Path, limit: Option<usize>, progress: bool) -> Result
     write_text(&stage.path("results.json"), &serde_json::to_string_pretty(&report)?)?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    write_text(&stage.path("run.toml"), &toml::to_string(&serde_json::json!({ "command": "eval", "set": set, "limit": limit.map(|l| l as i64).unwrap_or(-1), "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS }))?)?;
+    write_text(&stage.path("run.toml"), &toml::to_string(&serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "category": selection.category.clone().unwrap_or_else(|| "all".into()), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS }))?)?;
     let dir = stage.commit()?;
     println!("{table}");
     println!("wrote {} (open report.html)", dir.display());
@@ -343,7 +363,12 @@ pub fn markdown_table(r: &Report) -> String {
         }
         s.push_str(&format!("| failed reconstructions | {cat} | {} |", caps.len()));
         for (name, _) in VARIANTS {
-            s.push_str(&format!(" {} |", caps.iter().filter(|c| c.variants.get(name).is_none_or(|v| v.eval.is_none())).count()));
+            // A variant left out (`--full-only`) did not fail: it did not run.
+            if caps.iter().all(|c| !c.variants.contains_key(name)) {
+                s.push_str(" – |");
+            } else {
+                s.push_str(&format!(" {} |", caps.iter().filter(|c| c.variants.get(name).is_some_and(|v| v.eval.is_none())).count()));
+            }
         }
         s.push_str(" – |\n");
     }

@@ -133,6 +133,12 @@ enum Command {
         /// Only the first N captures of each object type.
         #[arg(long)]
         limit: Option<usize>,
+        /// Only this object type (bowl, mug or car).
+        #[arg(long)]
+        category: Option<String>,
+        /// Only the full model (no ablation columns): four times faster.
+        #[arg(long)]
+        full_only: bool,
     },
     /// Train an object shape prior (DeepSDF auto-decoder) for one category.
     ///
@@ -226,7 +232,7 @@ fn main() -> std::process::ExitCode {
         Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
         Command::Bench { command } => bench::run(command),
         Command::Reconstruct { capture, out, stage, config, ablate, seed } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref(), &ablate, seed, progress),
-        Command::Eval { preset, out, limit } => eval_cmd::run(preset, &out, limit, progress),
+        Command::Eval { preset, out, limit, category, full_only } => eval_cmd::run(preset, &out, &eval_cmd::Selection { limit, category, full_only }, progress),
         Command::TrainSdf { category, meshes, out, seed, shapes, steps, samples, held_out, width } => sdf_cmd::run(
             sdf_cmd::Options {
                 category: &category,

@@ -27,7 +27,7 @@ pub fn object_mesh(obj: &FittedObject) -> TriMesh {
 
 /// The posed body of a stage-2 state (mean adult shape), depth frame.
 pub fn posed_body(model: &BodyModel, prior: &PosePrior, st: &irmirror_recon::human::HumanState) -> Result<PosedBody<f64>> {
-    let shaped = model.shaped::<f64>(&vec![0.0; model.rank()])?;
+    let shaped = irmirror_recon::human::mean_adult(model)?;
     let mut rotations = prior.decode(&st.latent)?;
     rotations[0] = st.rotation;
     Ok(model.pose(&shaped, &irmirror_body::Pose { rotations, translation: st.translation })?)

@@ -3,8 +3,9 @@
 //!
 //! Parameters per hypothesis: root translation `t` (depth frame, m), root rotation
 //! `R = exp(ω) B` (`B` the initial orientation), pose latent `z` (32, the pose prior), shape
-//! fixed at the mean adult. Loss: `1 − soft IoU` between the soft occupancy of sampled reflected
-//! rays and the observed mask, plus `w_prior ‖z‖²`. Gradients: occupancy backward → vertices →
+//! fixed at the mean adult ([`mean_adult`]). Loss: `1 − soft IoU` between the soft occupancy of sampled reflected
+//! rays and the observed mask, plus `w_prior ‖z‖²`, an upright prior, and — where the floor is
+//! known (below a table, or the ground a car stands on) — the body's lowest point on it. Gradients: occupancy backward → vertices →
 //! body backward → rotations → pose prior VJP (all analytic; see the crates' FD tests).
 //!
 //! * **Edge sampling.** Each iteration draws `rays_per_iteration` rays without replacement with
@@ -13,7 +14,8 @@
 //!   Ablated: uniform draws of the same count.
 //! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
 //! * **Initialisations.** `inits` hypotheses, run in parallel: root on the mean reflected ray of
-//!   the mask at distances spread over `init_distance_m`, upright on the support plane, facing
+//!   the mask at distances log-spaced over `init_distance_m` (then standing on the floor, when
+//!   it is known), upright on the support plane, facing
 //!   the objects give or take 60°, pose latent 0 for the first and prior samples (×0.5) for the
 //!   rest. The best by final full-ray loss is kept; the `top_k` distinct ones are reported.
 
@@ -60,7 +62,15 @@ pub struct HumanConfig {
     /// Weight of the upright prior `1 − (R ẑ)·n` (people stand on the support plane's side:
     /// Anny's up should follow the plane normal; the pose bends the body, not the root).
     pub w_upright: f64,
-    /// Initial root distances along the mean reflected ray, metres.
+    /// Weight of the floor prior `((h_min − 0) / σ)²`, `h_min` the height of the body's lowest
+    /// vertex above the floor (people stand, sit or kneel on it); 0 switches it off.
+    pub w_floor: f64,
+    /// σ of the floor prior, metres.
+    pub floor_sigma_m: f64,
+    /// Height of a table above the floor, metres, when the support plane is a table (objects
+    /// that are not cars): the floor is this far below it (EN 527 desks: 0.72–0.76 m).
+    pub table_height_m: f64,
+    /// Range of the initial root distances along the mean reflected ray (log-spaced), metres.
     pub init_distance_m: [f64; 2],
     /// Distinct hypotheses reported.
     pub top_k: usize,
@@ -81,7 +91,10 @@ impl Default for HumanConfig {
             lr_latent: 0.08,
             w_prior: 2e-3,
             w_upright: 0.05,
-            init_distance_m: [0.8, 2.6],
+            w_floor: 0.01,
+            floor_sigma_m: 0.05,
+            table_height_m: 0.75,
+            init_distance_m: [0.7, 8.0],
             top_k: 3,
         }
     }
@@ -135,6 +148,24 @@ pub struct HumanProblem<'a> {
     pub up: Vector3<f64>,
     /// Centre of the objects, depth frame (the person faces it, roughly).
     pub objects_centre: Vector3<f64>,
+    /// The floor the person stands on, when known.
+    pub floor: Option<Floor>,
+}
+
+/// A horizontal floor: height of `p` above it = `up · p − offset_m`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    /// Unit up, depth frame.
+    pub up: Vector3<f64>,
+    /// `up · p` on the floor, metres.
+    pub offset_m: f64,
+}
+
+impl Floor {
+    /// Height of `p` (depth frame) above the floor, metres.
+    pub fn height(&self, p: &Vector3<f64>) -> f64 {
+        self.up.dot(p) - self.offset_m
+    }
 }
 
 /// Per-pixel chamfer distance (3-4, in pixels) to the nearest edge of `mask` (inside or out).
@@ -208,6 +239,13 @@ pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> 
     Matrix3::from_columns(&[x, y, z])
 }
 
+/// The body shape stage 2 fits with: the mean adult (the default phenotype, ≈ 1.69 m), not
+/// the shape basis' origin (coefficients 0 are a 1.84 m body: 9 % too tall, which biases the
+/// distance of every fit).
+pub fn mean_adult(model: &BodyModel) -> Result<irmirror_body::ShapedBody<f64>, ReconError> {
+    model.shaped_phenotype::<f64>(&irmirror_body::Phenotype::default()).map_err(|e| ReconError::Prior(e.to_string()))
+}
+
 /// Adam state over a flat parameter vector.
 struct Adam {
     m: Vec<f64>,
@@ -253,7 +291,7 @@ impl HumanProblem<'_> {
 
     /// Buffers reused across steps (allocation-free after the first step).
     pub fn scratch(&self) -> Result<Scratch, ReconError> {
-        let shaped = self.model.shaped::<f64>(&vec![0.0; self.model.rank()]).map_err(|e| ReconError::Prior(e.to_string()))?;
+        let shaped = mean_adult(self.model)?;
         Ok(Scratch {
             shaped,
             posed: self.model.posed_buffers(),
@@ -291,9 +329,19 @@ impl HumanProblem<'_> {
         let (l_iou, iou) = soft_iou(&occ.value, target, &mut ws.d_value);
         let prior: f64 = latent.iter().map(|x| x * x).sum();
         let up = self.up.normalize();
-        let loss = l_iou + cfg.w_prior * prior + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
+        let mut loss = l_iou + cfg.w_prior * prior + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
+        // Floor: the lowest vertex on it (its subgradient goes to that vertex alone).
+        let floor = self.floor.filter(|_| cfg.w_floor > 0.0).map(|f| {
+            let (k, h) = ws.posed.vertices.iter().enumerate().map(|(k, v)| (k, f.height(v))).min_by(|a, b| a.1.total_cmp(&b.1)).expect("a body has vertices");
+            let e = h / cfg.floor_sigma_m;
+            loss += cfg.w_floor * e * e;
+            (k, f.up * (2.0 * cfg.w_floor * e / cfg.floor_sigma_m))
+        });
         let Some(g) = grad else { return Ok((loss, iou)) };
         r.backward(rays, &occ, &ws.d_value, &params, Culling::Bvh, &mut ws.occ_grad);
+        if let Some((k, d)) = floor {
+            ws.occ_grad.vertices[k] += d;
+        }
         let bg = &mut ws.body_grad;
         self.model.backward(&ws.shaped, &pose, &mut ws.posed, OutputGrads { vertices: Some(&ws.occ_grad.vertices), ..Default::default() }, bg);
         // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
@@ -330,10 +378,27 @@ impl HumanProblem<'_> {
         let mut rng = irmirror_geom::rng::seeded(seed, 21);
         let n = cfg.inits.max(1);
         let mut out = Vec::with_capacity(n);
+        // Height of the root above the floor for the mean pose standing upright.
+        let root_height = match self.floor {
+            Some(_) => {
+                let st = HumanState { translation: Vector3::zeros(), rotation: upright_facing(&Vector3::z(), &-Vector3::y()), latent: vec![0.0; irmirror_body::prior::LATENT] };
+                let mut ws = self.scratch()?;
+                self.model.pose_into(&ws.shaped, &self.pose(&st)?, &mut ws.posed).map_err(|e| ReconError::Prior(e.to_string()))?;
+                -ws.posed.vertices.iter().map(|v| v.z).fold(f64::INFINITY, f64::min)
+            }
+            None => 0.0,
+        };
+        let [near, far] = cfg.init_distance_m;
         for k in 0..n {
+            // Log-spaced: the mirror image of someone 1 m away and of someone 8 m away differ
+            // by as much as those at 4 and 8 m.
             let frac = (k as f64 + rng.random_range(0.2..0.8)) / n as f64;
-            let dist = cfg.init_distance_m[0] + (cfg.init_distance_m[1] - cfg.init_distance_m[0]) * frac;
-            let p = o + d * dist;
+            let dist = near * (far / near.max(1e-3)).powf(frac);
+            let mut p = o + d * dist;
+            // With a floor, stand there: the ray passes through the body's column.
+            if let Some(f) = self.floor {
+                p += f.up * (root_height - f.height(&p));
+            }
             let facing = self.objects_centre - p;
             let base = upright_facing(&self.up, &facing);
             let yaw: f64 = rng.random_range(-1.0..1.0);

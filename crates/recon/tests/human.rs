@@ -59,7 +59,7 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
     let root = sim.body.joints[0];
     let rv = &sc.person.rotvec_rad;
     let (r0, up) = true_root(&sc, &sim);
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation };
+    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor: None };
     let start = HumanState {
         translation: root + Vector3::new(0.2, 0.0, 0.0),
         rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(problem.up * 20f64.to_radians())) * r0,
@@ -81,19 +81,22 @@ fn a_mask_off_the_objects_is_a_clear_error() {
     use irmirror_recon::human::*;
     let rays = irmirror_render::reflect::ReflectedRays::<f64> { width: 4, height: 4, ..Default::default() };
     let mask = irmirror_capture::Image::filled(4, 4, true);
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &mask, up: nalgebra::Vector3::y(), objects_centre: nalgebra::Vector3::zeros() };
+    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &mask, up: nalgebra::Vector3::y(), objects_centre: nalgebra::Vector3::zeros(), floor: None };
     let e = fit_human(&problem, &HumanConfig::default(), 0, &|_| {}).unwrap_err();
     assert!(matches!(e, irmirror_recon::ReconError::NoMaskRays), "{e}");
 }
 
 /// `HumanProblem::loss_grad` (occupancy → body → root rotation exp(ω)B and pose prior, plus the
-/// latent and upright priors) against central differences, f64, all rays, at ω ≠ 0.
+/// latent, upright and floor priors) against central differences, f64, all rays, at ω ≠ 0.
 #[test]
 fn stage2_gradient_matches_finite_differences() {
     use irmirror_recon::human::*;
     let (sc, sim, rays) = car_capture(1);
     let (r0, up) = true_root(&sc, &sim);
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation };
+    // A floor 6 cm below the true one, so its term is active.
+    let lowest = sim.body.mesh.vertices.iter().map(|v| up.dot(&Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])))).fold(f64::INFINITY, f64::min);
+    let floor = Some(Floor { up, offset_m: lowest - 0.06 });
+    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor };
     let cfg = HumanConfig::default();
     let sigma = 4e-4;
     let target = problem.targets();

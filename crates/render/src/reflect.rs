@@ -135,6 +135,56 @@ pub fn reflect_camera(
     out
 }
 
+/// Sub-pixel offsets tried by [`reflect_footprint`], nearest the centre first (pixel units).
+const FOOTPRINT: [(f64, f64); 8] = [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -0.3), (0.3, 0.3), (-0.3, 0.3), (0.3, -0.3), (-0.3, -0.3)];
+
+/// For each of `pixels` (row-major indices) whose centre ray misses every object, the first ray
+/// through its footprint (offsets ±0.3 px, nearest first) that hits one, reflected with the raw
+/// normal. A pixel integrates over its footprint, so a silhouette pixel whose centre misses can
+/// still show a reflection (a mug's thin rim): these rays let such a pixel count. Pixels whose
+/// centre hits, or whose whole footprint misses, give no ray.
+pub fn reflect_footprint(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>, objects: &[PlacedSdf], trace_params: &TraceParams, pixels: &[u32]) -> ReflectedRays<f64> {
+    let w = camera.width;
+    let nearest = |ray: &irmirror_geom::Ray<f64>| {
+        objects.iter().enumerate().filter_map(|(k, obj)| trace(obj, ray, trace_params).map(|hit| (k as u16, hit))).min_by(|a, b| a.1.t_m.total_cmp(&b.1.t_m))
+    };
+    let found: Vec<Option<(u32, u16, Vector3<f64>, SurfaceHit)>> = pixels
+        .par_iter()
+        .map(|&p| {
+            let (u, v) = (f64::from(p % w) + 0.5, f64::from(p / w) + 0.5);
+            let centre = depth_from_camera.transform_ray(&camera.ray_at::<f64>(u, v));
+            if nearest(&centre).is_some() {
+                return None;
+            }
+            FOOTPRINT.iter().find_map(|&(du, dv)| {
+                let ray = depth_from_camera.transform_ray(&camera.ray_at::<f64>(u + du, v + dv));
+                nearest(&ray).map(|(k, hit)| (p, k, ray.dir, hit))
+            })
+        })
+        .collect();
+    let mut out = ReflectedRays { width: camera.width, height: camera.height, ..Default::default() };
+    for (p, k, dir, hit) in found.into_iter().flatten() {
+        out.pixel.push(p);
+        out.object.push(k);
+        out.origin.push(hit.point);
+        out.dir.push(reflect(&dir, &hit.normal).normalize());
+        out.normal.push(hit.normal);
+    }
+    out
+}
+
+impl<T: Real> ReflectedRays<T> {
+    /// Appends `other`'s rays (same image size).
+    pub fn extend(&mut self, other: &ReflectedRays<T>) {
+        debug_assert_eq!((self.width, self.height), (other.width, other.height));
+        self.pixel.extend_from_slice(&other.pixel);
+        self.object.extend_from_slice(&other.object);
+        self.origin.extend_from_slice(&other.origin);
+        self.dir.extend_from_slice(&other.dir);
+        self.normal.extend_from_slice(&other.normal);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -169,6 +219,32 @@ mod tests {
         // The centre pixel looks straight at the sphere and is reflected straight back.
         let i = rays.pixel.iter().position(|&p| p == 12 * 32 + 16).unwrap();
         assert!(rays.dir[i].z < -0.99);
+    }
+
+    /// A pixel whose centre ray passes just outside a mirror sphere but whose footprint grazes it
+    /// gets the analytic reflection at the sub-pixel ray that hits; a pixel whose centre hits,
+    /// and one far from the sphere, get none.
+    #[test]
+    fn footprint_rays_match_the_closed_form() {
+        let c = Vector3::new(0.0, 0.0, 0.5);
+        let obj = PlacedSdf { sdf: Arc::new(Sphere { radius: 1.0 }), depth_from_object: Similarity3::new(Matrix3::identity(), c, 0.15).unwrap() };
+        let cam = PinholeCamera { width: 32, height: 24, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 };
+        let tight = TraceParams { coarse_tol_rel: 1e-9, max_iters: 4000, ..TraceParams::default() };
+        let centres = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, Normals::Raw);
+        // The sphere's silhouette radius in pixels: 30 · tan(asin(0.15 / 0.5)) ≈ 9.43, so on
+        // row 12 (through the centre) column 16 + 9 = 25 has its centre 9.5 px out (a miss)
+        // and its footprint reaches 9.2 px (a hit).
+        let edge = 12 * 32 + 25;
+        assert!(!centres.pixel.contains(&edge));
+        let rays = reflect_footprint(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, &[edge, 12 * 32 + 16, 12 * 32 + 31]);
+        assert_eq!(rays.pixel, vec![edge]);
+        let hit = rays.origin[0];
+        let n = (hit - c) / 0.15;
+        assert!((hit - c).norm() - 0.15 < 1e-7, "on the sphere");
+        let d = hit.normalize();
+        let (u, v) = cam.project(&hit).unwrap();
+        assert!((u - 25.5).abs() <= 0.3 + 1e-9 && (v - 12.5).abs() <= 0.3 + 1e-9, "inside the footprint: {u}, {v}");
+        assert!((rays.dir[0] - (d - n * (2.0 * d.dot(&n)))).norm() < 1e-6);
     }
 
     #[test]
