@@ -133,7 +133,7 @@ pub fn floor(objects: &Objects, cfg: &HumanConfig) -> Option<Floor> {
         let base = s.translation + s.rotation * Vector3::new(0.0, car.shape.base_y(), 0.0) * s.scale;
         return Some(Floor { up, offset_m: up.dot(&base) });
     }
-    objects.plane.found.then(|| Floor { up, offset_m: objects.plane.offset_m - cfg.table_height_m })
+    objects.plane.found.then_some(Floor { up, offset_m: objects.plane.offset_m - cfg.table_height_m })
 }
 
 /// Runs stages 0–2.

@@ -148,7 +148,9 @@ pub fn reflect_footprint(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>
     let nearest = |ray: &irmirror_geom::Ray<f64>| {
         objects.iter().enumerate().filter_map(|(k, obj)| trace(obj, ray, trace_params).map(|hit| (k as u16, hit))).min_by(|a, b| a.1.t_m.total_cmp(&b.1.t_m))
     };
-    let found: Vec<Option<(u32, u16, Vector3<f64>, SurfaceHit)>> = pixels
+    // Per pixel: (pixel, object, camera ray direction, hit).
+    type Found = Option<(u32, u16, Vector3<f64>, SurfaceHit)>;
+    let found: Vec<Found> = pixels
         .par_iter()
         .map(|&p| {
             let (u, v) = (f64::from(p % w) + 0.5, f64::from(p / w) + 0.5);
