@@ -580,10 +580,16 @@ mod tests {
 
     /// The analytic rotation (left tangent), translation and log-scale gradients of the stage-1
     /// loss against central differences, on a mug seen from one side with free-space points and
-    /// the plane terms active.
+    /// the plane terms active; and the same geometry fitted as a (tiny) car, so the car size
+    /// prior is active too.
     #[test]
     fn pose_gradients_match_finite_differences() {
-        let family = Family::Mug;
+        for family in [Family::Mug, Family::Car] {
+            pose_gradients_for(family);
+        }
+    }
+
+    fn pose_gradients_for(family: Family) {
         let truth = State { rotation: upright(&Vector3::new(0.1, -0.9, -0.3).normalize(), 0.7), translation: Vector3::new(0.02, 0.1, 0.7), log_scale: 0.07f64.ln(), u: [0.4, 0.6] };
         let placed = PlacedSdf { sdf: family.shape(&truth.u).sdf(), depth_from_object: truth.sim() };
         // Surface points by projecting a grid onto the surface; free points 1 cm out along −z.
