@@ -279,6 +279,12 @@ fn eval_writes_table_results_and_report() {
     assert!(std::fs::read_to_string(out.join("report.html")).unwrap().contains("captures/car_00/third.png"));
     assert!(out.join("run.toml").is_file());
     assert!(!out.join("scratch").exists());
+
+    // An object type the benchmark does not have: a clear error, nothing written.
+    let bad = tmp("eval-teapot");
+    let o = irmirror(&["eval", "--category", "teapot", "--full-only", "--out", bad.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("teapot") && stderr(&o).contains("bowl, mug, car"), "{}", stderr(&o));
+    assert!(!bad.exists());
 }
 
 #[test]

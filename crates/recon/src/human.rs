@@ -381,7 +381,8 @@ impl HumanProblem<'_> {
         // Height of the root above the floor for the mean pose standing upright.
         let root_height = match self.floor {
             Some(_) => {
-                let st = HumanState { translation: Vector3::zeros(), rotation: upright_facing(&Vector3::z(), &-Vector3::y()), latent: vec![0.0; irmirror_body::prior::LATENT] };
+                // Anny's own frame is Z up: the identity root stands upright.
+                let st = HumanState { translation: Vector3::zeros(), rotation: Matrix3::identity(), latent: vec![0.0; irmirror_body::prior::LATENT] };
                 let mut ws = self.scratch()?;
                 self.model.pose_into(&ws.shaped, &self.pose(&st)?, &mut ws.posed).map_err(|e| ReconError::Prior(e.to_string()))?;
                 -ws.posed.vertices.iter().map(|v| v.z).fold(f64::INFINITY, f64::min)

@@ -421,8 +421,8 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
     spread.sort_by(f64::total_cmp);
     let r95 = spread[(spread.len() as f64 * 0.95) as usize].max(1e-3);
     // A category with a size prior starts at its typical size: a car's side overflows the
-    // image, so the spread of its points says little (starting at half size, the fit stayed
-    // 7–20 % small).
+    // image, so the spread of its points says little (starting at half size, before the IMU
+    // up, the fit stayed 6–20 % small).
     let s0 = match family.size_prior() {
         Some((mean, _)) => mean.exp(),
         None => r95 / 0.85,

@@ -65,12 +65,17 @@ impl<T: Real> ReflectedRays<T> {
         out.dir.clear();
         out.normal.clear();
         for &i in indices {
-            out.pixel.push(self.pixel[i]);
-            out.object.push(self.object[i]);
-            out.origin.push(self.origin[i]);
-            out.dir.push(self.dir[i]);
-            out.normal.push(self.normal[i]);
+            out.push(self.pixel[i], self.object[i], self.origin[i], self.dir[i], self.normal[i]);
         }
+    }
+
+    /// Appends one ray.
+    pub fn push(&mut self, pixel: u32, object: u16, origin: Vector3<T>, dir: Vector3<T>, normal: Vector3<T>) {
+        self.pixel.push(pixel);
+        self.object.push(object);
+        self.origin.push(origin);
+        self.dir.push(dir);
+        self.normal.push(normal);
     }
 
     /// Converts the scalar type.
@@ -95,11 +100,7 @@ pub fn reflect_camera(
         .into_par_iter()
         .map(|p| {
             let ray = depth_from_camera.transform_ray(&camera.pixel_ray::<f64>((p % w) as u32, (p / w) as u32));
-            objects
-                .iter()
-                .enumerate()
-                .filter_map(|(k, obj)| trace(obj, &ray, trace_params).map(|hit| (k as u16, ray.dir, hit)))
-                .min_by(|a, b| a.2.t_m.total_cmp(&b.2.t_m))
+            nearest_hit(objects, &ray, trace_params).map(|(k, hit)| (k, ray.dir, hit))
         })
         .collect();
     let mut out = ReflectedRays { width: camera.width, height: camera.height, ..Default::default() };
@@ -126,13 +127,14 @@ pub fn reflect_camera(
                 sum.try_normalize(1e-12).unwrap_or(hit.normal)
             }
         };
-        out.pixel.push(p as u32);
-        out.object.push(*k);
-        out.origin.push(hit.point);
-        out.dir.push(reflect(dir, &n).normalize());
-        out.normal.push(n);
+        out.push(p as u32, *k, hit.point, reflect(dir, &n).normalize(), n);
     }
     out
+}
+
+/// The nearest surface along `ray` among `objects`: (object index, hit).
+fn nearest_hit(objects: &[PlacedSdf], ray: &irmirror_geom::Ray<f64>, trace_params: &TraceParams) -> Option<(u16, SurfaceHit)> {
+    objects.iter().enumerate().filter_map(|(k, obj)| trace(obj, ray, trace_params).map(|hit| (k as u16, hit))).min_by(|a, b| a.1.t_m.total_cmp(&b.1.t_m))
 }
 
 /// Sub-pixel offsets tried by [`reflect_footprint`], nearest the centre first (pixel units).
@@ -145,9 +147,7 @@ const FOOTPRINT: [(f64, f64); 8] = [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -
 /// centre hits, or whose whole footprint misses, give no ray.
 pub fn reflect_footprint(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>, objects: &[PlacedSdf], trace_params: &TraceParams, pixels: &[u32]) -> ReflectedRays<f64> {
     let w = camera.width;
-    let nearest = |ray: &irmirror_geom::Ray<f64>| {
-        objects.iter().enumerate().filter_map(|(k, obj)| trace(obj, ray, trace_params).map(|hit| (k as u16, hit))).min_by(|a, b| a.1.t_m.total_cmp(&b.1.t_m))
-    };
+    let nearest = |ray: &irmirror_geom::Ray<f64>| nearest_hit(objects, ray, trace_params);
     // Per pixel: (pixel, object, camera ray direction, hit).
     type Found = Option<(u32, u16, Vector3<f64>, SurfaceHit)>;
     let found: Vec<Found> = pixels
@@ -166,11 +166,7 @@ pub fn reflect_footprint(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>
         .collect();
     let mut out = ReflectedRays { width: camera.width, height: camera.height, ..Default::default() };
     for (p, k, dir, hit) in found.into_iter().flatten() {
-        out.pixel.push(p);
-        out.object.push(k);
-        out.origin.push(hit.point);
-        out.dir.push(reflect(&dir, &hit.normal).normalize());
-        out.normal.push(hit.normal);
+        out.push(p, k, hit.point, reflect(&dir, &hit.normal).normalize(), hit.normal);
     }
     out
 }
