@@ -27,6 +27,19 @@ pub enum BenchCommand {
         #[arg(long, value_delimiter = ',', default_values_t = [1e-4, 1e-7])]
         epsilon: Vec<f64>,
     },
+    /// Stage 1 (support plane, segmentation, object fits) against the simulator's truth: one
+    /// row per object and the median / 90th percentile / max per category.
+    Objects {
+        /// Scene preset.
+        #[arg(long, value_enum, default_value = "tabletop")]
+        preset: crate::simulate_cmd::Preset,
+        /// Seeds 0..N.
+        #[arg(long, default_value_t = 20)]
+        seeds: u64,
+        /// Ignore the capture's object masks and segment the depth image instead.
+        #[arg(long)]
+        segment: bool,
+    },
     /// Body model: shape, forward (FK + LBS + keypoints) and backward, in f32.
     Body {
         /// Timed repetitions per row (the median is reported).
@@ -52,6 +65,7 @@ pub(crate) fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
         BenchCommand::Render { scene, reps, no_dense, epsilon } => crate::bench_render::run(&scene, reps, no_dense, &epsilon),
+        BenchCommand::Objects { preset, seeds, segment } => crate::bench_objects::run(preset, seeds, segment),
         BenchCommand::Body { reps } => {
             let model = BodyModel::builtin()?;
             let z: Vec<f32> = model.shape_coefficients(&Phenotype::default())?.iter().map(|&x| x as f32).collect();

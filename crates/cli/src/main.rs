@@ -1,6 +1,7 @@
 //! `irmirror`: reconstruct people from their thermal reflections. See `irmirror --help`.
 
 mod bench;
+mod bench_objects;
 mod bench_render;
 mod body_cmd;
 mod demo;

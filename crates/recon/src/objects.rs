@@ -533,42 +533,90 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
         return Err(ReconError::NoSupportPlane);
     }
     let mut clusters = if missing > 0 { crate::segment::segment(&points, depth.width, depth.height, &plane, &given, &cfg.segment) } else { vec![] };
+    // Touching objects join into one cluster: split the largest until there are enough (or
+    // none can be split). `group[k]`: the cluster that cluster k was split from.
+    let mut group: Vec<usize> = (0..clusters.len()).collect();
+    while clusters.len() < missing
+        && let Some((a, b)) = clusters.first().and_then(|c| crate::segment::split(&points, c, &plane, &cfg.segment))
+    {
+        clusters.remove(0);
+        let g = group.remove(0);
+        clusters.extend([a, b]);
+        group.extend([g, g]);
+        let size = |m: &Image<bool>| m.data.iter().filter(|&&v| v).count();
+        let mut order: Vec<usize> = (0..clusters.len()).collect();
+        order.sort_by_key(|&k| std::cmp::Reverse(size(&clusters[k])));
+        clusters = order.iter().map(|&k| clusters[k].clone()).collect();
+        group = order.iter().map(|&k| group[k]).collect();
+    }
     if clusters.len() < missing {
         return Err(ReconError::Segmentation { wanted: missing, found: clusters.len() });
     }
     clusters.truncate(missing);
-    let mut clusters = clusters.into_iter();
+    group.truncate(missing);
+    let mut clusters = clusters.into_iter().zip(group);
     let mut masks = Vec::new();
     let mut segmented = Vec::new();
+    let mut groups = Vec::new();
     for o in &capture.objects {
         match &o.mask {
             Some(m) => {
                 masks.push(m.clone());
                 segmented.push(false);
+                groups.push(None);
             }
             None => {
-                masks.push(clusters.next().expect("one cluster per object without a mask"));
+                let (m, g) = clusters.next().expect("one cluster per object without a mask");
+                masks.push(m);
                 segmented.push(true);
+                groups.push(Some(g));
             }
         }
     }
     // Segmented clusters come largest first, not in capture order: give each cluster the
     // family (among the mask-less objects' categories) that fits it best.
+    let mut options: Vec<Family> = Vec::new();
+    for (_, f) in capture.objects.iter().zip(&families).filter(|(o, _)| o.mask.is_none()) {
+        if !options.contains(f) {
+            options.push(*f);
+        }
+    }
     let mut objects = Vec::with_capacity(masks.len());
     for (k, mask) in masks.iter().enumerate() {
         let obs = observe(depth, cam, mask, &cfg.fit)?;
         let fit = if segmented[k] {
-            let mut options: Vec<Family> = Vec::new();
-            for (_, f) in capture.objects.iter().zip(&families).filter(|(o, _)| o.mask.is_none()) {
-                if !options.contains(f) {
-                    options.push(*f);
-                }
-            }
             options.iter().map(|f| fit_family(*f, &obs, &plane, &cfg.fit)).min_by(|a, b| a.loss.total_cmp(&b.loss)).expect("one option")
         } else {
             fit_family(families[k], &obs, &plane, &cfg.fit)
         };
         objects.push(fit);
+    }
+    // Objects split from one cluster: the split's straight cut is only a first guess. Give every
+    // point of the cluster to the fitted surface nearest to it, and refit on those masks.
+    let mut done = vec![false; masks.len()];
+    for k in 0..masks.len() {
+        let Some(g) = groups[k] else { continue };
+        let members: Vec<usize> = (0..masks.len()).filter(|&j| groups[j] == Some(g)).collect();
+        if members.len() < 2 || done[k] {
+            continue;
+        }
+        let placed: Vec<PlacedSdf> = members.iter().map(|&j| objects[j].placed()).collect();
+        let mut new: Vec<Image<bool>> = members.iter().map(|_| Image::filled(depth.width, depth.height, false)).collect();
+        for i in 0..points.len() {
+            if let Some(p) = points[i]
+                && members.iter().any(|&j| masks[j].data[i])
+            {
+                let best = (0..members.len()).min_by(|&a, &b| placed[a].distance(&p).abs().total_cmp(&placed[b].distance(&p).abs())).expect("members");
+                new[best].data[i] = true;
+            }
+        }
+        for (&j, m) in members.iter().zip(new) {
+            done[j] = true;
+            let Ok(obs) = observe(depth, cam, &m, &cfg.fit) else { continue };
+            let family = Family::of(&objects[j].category)?;
+            objects[j] = fit_family(family, &obs, &plane, &cfg.fit);
+            masks[j] = m;
+        }
     }
     Ok(Objects { plane, objects, masks, segmented })
 }

@@ -150,3 +150,61 @@ fn car_side_fits_the_truth() {
     // IMU up and the size prior: 21–30 % scale, 2.5–4° tilt, 5–7° ray angle.
     assert!(worst.0 < 0.02 && worst.1 < 1.0 && worst.2 < 3.0 && worst.3 < 0.5, "worst {worst:?}");
 }
+
+/// Horizontal radius of a body of revolution about +Y, object units.
+fn unit_radius(shape: &irmirror_render::shapes::Shape) -> f64 {
+    let sdf = shape.sdf();
+    let mut r = 0.0f64;
+    for j in -100..=100 {
+        let y = f64::from(j) * 0.01;
+        if let Some(x) = (0..=2000).rev().map(|k| f64::from(k) * 1e-3).find(|&x| sdf.distance(&Vector3::new(x, y, 0.0)) <= 0.0) {
+            r = r.max(x);
+        }
+    }
+    r
+}
+
+/// Two bowls touching side by side: depth clustering sees one object; stage 1 splits it and
+/// fits both (segmentation of touching-but-distinct objects, issue 7).
+#[test]
+fn touching_objects_are_separated() {
+    use irmirror_render::shapes::Shape;
+    let seed = 0;
+    let mut sc = scene(seed);
+    let template = sc.objects[0].clone();
+    let (a, b) = (Shape::Bowl { cut: -0.1, wall: 0.06 }, Shape::Bowl { cut: -0.05, wall: 0.05 });
+    let (sa, sb) = (0.10, 0.09);
+    // Rims pressed 2 mm into each other: a contact 4 cm long (a single point of contact is
+    // below the depth camera's 3 mm pixels).
+    let gap = unit_radius(&a) * sa + unit_radius(&b) * sb - 0.002;
+    sc.objects = vec![
+        irmirror_sim::scene::SceneObject { shape: a, base_m: [-0.08, -0.05, 0.75], scale_m: sa, ..template.clone() },
+        irmirror_sim::scene::SceneObject { shape: b, base_m: [-0.08 + gap, -0.05, 0.75], scale_m: sb, ..template },
+    ];
+    let (dir, truth) = write("touch", &sc, seed);
+    let cap = Capture::load(&dir).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    let true_masks: Vec<_> = cap.objects.iter().map(|o| o.mask.clone().unwrap()).collect();
+    let mut no_masks = cap.clone();
+    no_masks.objects.iter_mut().for_each(|o| o.mask = None);
+    // One cluster before the split.
+    let points = irmirror_recon::segment::depth_points(&cap.depth_m, &cap.depth_camera);
+    let objs = reconstruct_objects(&no_masks, &Stage1Config::default(), seed).unwrap();
+    let clusters = irmirror_recon::segment::segment(&points, cap.depth_m.width, cap.depth_m.height, &objs.plane, &vec![false; points.len()], &Default::default());
+    assert_eq!(clusters.len(), 1, "the bowls should touch");
+    assert_eq!(objs.objects.len(), 2);
+    for (k, (t, m)) in truth.iter().zip(&true_masks).enumerate() {
+        // Pair by the nearest fit; its mask must be the true one (IoU) and its pose right.
+        let (j, o) = objs.objects.iter().enumerate().min_by(|x, y| (x.1.depth_from_object.translation - t.translation).norm().total_cmp(&(y.1.depth_from_object.translation - t.translation).norm())).unwrap();
+        // Pixels below the segmentation's height threshold (the foot of each bowl) are in no
+        // cluster: score the split within the cluster — precision and recall of each half.
+        let in_cluster = |i: usize| clusters[0].data[i];
+        let fitted = &objs.masks[j].data;
+        let tp = (0..fitted.len()).filter(|&i| fitted[i] && m.data[i]).count() as f64;
+        let precision = tp / fitted.iter().filter(|&&v| v).count() as f64;
+        let recall = tp / (0..fitted.len()).filter(|&i| m.data[i] && in_cluster(i)).count() as f64;
+        let e = errors(&o.depth_from_object, t);
+        eprintln!("touching bowl {k}: mask precision {precision:.3}, recall {recall:.3}, t {:.1} mm, s {:.1} %", e.0 * 1e3, e.2);
+        assert!(precision > 0.97 && recall > 0.97 && e.0 < 0.012 && e.2 < 5.0, "bowl {k}: precision {precision}, recall {recall}, errors {e:?}");
+    }
+}

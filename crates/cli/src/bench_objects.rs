@@ -1,0 +1,128 @@
+//! `irmirror bench objects`: stage 1 against the simulator's truth over many seeds (issue 7's
+//! figure): translation, up-axis and (for mugs, whose handle breaks the symmetry) full rotation
+//! error, scale error, Chamfer distance to the true mesh, and time per object.
+
+use anyhow::{Context, Result};
+use irmirror_body::BodyModel;
+use irmirror_capture::Capture;
+use irmirror_geom::Similarity3;
+use irmirror_geom::nalgebra::Vector3;
+use irmirror_recon::objects::{Stage1Config, reconstruct_objects};
+use crate::simulate_cmd::{Preset, Thermal, preset_scene};
+use std::time::Instant;
+
+/// One fitted object against its truth.
+struct Row {
+    seed: u64,
+    category: &'static str,
+    translation_mm: f64,
+    up_deg: f64,
+    /// Full rotation error; `None` for bodies of revolution (bowls).
+    rotation_deg: Option<f64>,
+    scale_pct: f64,
+    chamfer_mm2: f64,
+    time_s: f64,
+}
+
+fn errors(fit: &Similarity3<f64>, truth: &Similarity3<f64>) -> (f64, f64, f64, f64) {
+    let t = (fit.translation - truth.translation).norm() * 1e3;
+    let up = (fit.rotation * Vector3::y()).angle(&(truth.rotation * Vector3::y())).to_degrees();
+    let d = fit.rotation * truth.rotation.transpose();
+    let full = ((d.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
+    (t, up, full, (fit.scale / truth.scale - 1.0).abs() * 100.0)
+}
+
+/// Simulates `seeds` captures of `preset`, runs stage 1 on each (masks as the capture gives
+/// them, or segmentation with `segment`), prints one row per object and a summary per category.
+pub fn run(preset: Preset, seeds: u64, segment: bool) -> Result<()> {
+    let model = BodyModel::builtin()?;
+    let cfg = Stage1Config::default();
+    let scratch = std::env::temp_dir().join(format!("irmirror-bench-objects-{}", std::process::id()));
+    let bar = indicatif::ProgressBar::new(seeds);
+    bar.set_style(indicatif::ProgressStyle::with_template("bench objects {bar:40} {pos}/{len} captures {elapsed}/{eta}").expect("valid template"));
+    let mut rows = Vec::new();
+    for seed in 0..seeds {
+        let scene = preset_scene(&model, preset, Thermal::Lepton, seed)?;
+        let sim = irmirror_sim::simulate(&model, &scene, seed)?;
+        let dir = scratch.join(format!("{seed}"));
+        sim.write(&model, &dir, seed)?;
+        let mut capture = Capture::load(&dir).context("the simulated capture does not load")?;
+        if segment {
+            capture.objects.iter_mut().for_each(|o| o.mask = None);
+        }
+        let t0 = Instant::now();
+        let objects = reconstruct_objects(&capture, &cfg, seed).with_context(|| format!("seed {seed}: stage 1"))?;
+        let time_s = t0.elapsed().as_secs_f64() / objects.objects.len() as f64;
+        for (k, (truth, true_mesh)) in sim.object_poses.iter().zip(&sim.object_meshes).enumerate() {
+            // Segmented objects come largest first: pair each true object with the nearest fit.
+            let fit = if segment {
+                objects.objects.iter().min_by(|a, b| (a.depth_from_object.translation - truth.translation).norm().total_cmp(&(b.depth_from_object.translation - truth.translation).norm())).expect("at least one object")
+            } else {
+                &objects.objects[k]
+            };
+            let category = scene.objects[k].shape.category();
+            let (t, up, full, s) = errors(&fit.depth_from_object, truth);
+            rows.push(Row {
+                seed,
+                category,
+                translation_mm: t,
+                up_deg: up,
+                rotation_deg: (category == "mug").then_some(full),
+                scale_pct: s,
+                chamfer_mm2: irmirror_sdf::quality::chamfer(&crate::result::object_mesh(fit), true_mesh, 5000, 0) * 1e6,
+                time_s,
+            });
+        }
+        std::fs::remove_dir_all(&dir).ok();
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    std::fs::remove_dir_all(&scratch).ok();
+    println!("stage 1 on the {preset:?} preset, seeds 0–{}, {} objects, masks {}, {} threads", seeds.saturating_sub(1), rows.len(), if segment { "segmented" } else { "given" }, rayon::current_num_threads());
+    println!("\n| seed | object | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|");
+    for r in &rows {
+        let rot = r.rotation_deg.map_or("–".to_string(), |x| format!("{x:.1}"));
+        println!("| {} | {} | {:.1} | {:.2} | {rot} | {:.1} | {:.2} | {:.2} |", r.seed, r.category, r.translation_mm, r.up_deg, r.scale_pct, r.chamfer_mm2, r.time_s);
+    }
+    println!("\nmedian / 90th percentile / max (goals: ≤ 5 mm, ≤ 3°, ≤ 3 %, ≤ 2 s per object)\n");
+    println!("| object | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|");
+    let mut categories: Vec<&str> = rows.iter().map(|r| r.category).collect();
+    categories.dedup();
+    categories.sort();
+    categories.dedup();
+    for c in categories {
+        let sel: Vec<&Row> = rows.iter().filter(|r| r.category == c).collect();
+        let col = |f: &dyn Fn(&Row) -> Option<f64>| {
+            let v: Vec<f64> = sel.iter().filter_map(|r| f(r)).collect();
+            if v.is_empty() { "–".to_string() } else { stats(v) }
+        };
+        println!(
+            "| {c} | {} | {} | {} | {} | {} | {} | {} |",
+            sel.len(),
+            col(&|r| Some(r.translation_mm)),
+            col(&|r| Some(r.up_deg)),
+            col(&|r| r.rotation_deg),
+            col(&|r| Some(r.scale_pct)),
+            col(&|r| Some(r.chamfer_mm2)),
+            col(&|r| Some(r.time_s)),
+        );
+    }
+    Ok(())
+}
+
+/// "median / 90th percentile / max".
+fn stats(mut v: Vec<f64>) -> String {
+    v.sort_by(f64::total_cmp);
+    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+    let f = |x: f64| if x < 10.0 { format!("{x:.2}") } else { format!("{x:.1}") };
+    format!("{} / {} / {}", f(q(0.5)), f(q(0.9)), f(v[v.len() - 1]))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn stats_are_order_statistics() {
+        assert_eq!(super::stats(vec![3.0, 1.0, 2.0]), "2.00 / 3.00 / 3.00");
+        assert_eq!(super::stats((1..=11).map(f64::from).rev().collect()), "6.00 / 10.0 / 11.0");
+    }
+}
