@@ -15,7 +15,8 @@
 //!   depth; smooth where rays miss the current object, so it pulls from afar). The rendered form
 //!   removed a 2–3 mm bias of the point form alone (20 seeds: bowl translation median 2.4 →
 //!   0.3 mm, mug scale max 11 → 1.6 %; `irmirror bench objects`). Its weight is 0.3: at 1 the
-//!   car's door (depth noise ~3 mm at 1.5 m) fitted worse across its length (5 → 28 mm);
+//!   car's door (mean point residual 2.6 mm, the depth noise at 1.5–2.5 m) fitted worse across
+//!   its length (≤ 9 → 28 mm over 4 seeds);
 //! * `L_mask` — free space: points just in front of the observed surface, and points along the
 //!   rays of a ring of pixels around the mask (where the depth camera saw past the object), must
 //!   lie outside (hinge on `−d`): this is what keeps the silhouette from growing;
@@ -186,7 +187,7 @@ pub struct FittedObject {
     /// Object frame → depth frame (rotation, translation in metres, scale in metres per unit).
     #[serde(serialize_with = "ser_sim")]
     pub depth_from_object: Similarity3<f64>,
-    /// Final loss of the kept restart.
+    /// Loss of the kept state (the best iterate of the best restart).
     pub loss: f64,
     /// Mean |signed distance| of the observed surface points to the fitted surface, metres.
     pub mean_surface_error_m: f64,
@@ -411,7 +412,7 @@ impl Problem<'_> {
         let iters = self.cfg.iterations.max(1);
         // The best iterate is kept: the loss is not smooth (rays enter and leave the rendered
         // set, a handle passes behind the body) and Adam's first steps can leave a good start for
-        // a worse basin (measured: from the true pose, to 18× its loss on 2 of 4 mugs).
+        // a worse basin (measured: from the true pose, to 18–36× its loss on 2 of 4 mugs).
         let mut best = (f64::INFINITY, st);
         for it in 0..iters {
             let mut g = Grad { rot: Vector3::zeros(), t: Vector3::zeros(), log_s: 0.0 };
