@@ -33,8 +33,8 @@ pub enum BenchCommand {
         /// Scene preset.
         #[arg(long, value_enum, default_value = "tabletop")]
         preset: crate::simulate_cmd::Preset,
-        /// Seeds 0..N.
-        #[arg(long, default_value_t = 20)]
+        /// Seeds 0..N (N ≥ 1).
+        #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
         seeds: u64,
         /// Ignore the capture's object masks and segment the depth image instead.
         #[arg(long)]

@@ -115,6 +115,13 @@ fn benches_print_their_tables() {
     let o = irmirror(&["bench", "body", "--reps", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(String::from_utf8_lossy(&o.stdout).contains("| backward"));
+    // Stage 1 against the truth: seed 0 of the tabletop preset is a bowl and a mug.
+    let o = irmirror(&["bench", "objects", "--seeds", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("| 0 | bowl |") && out.contains("| 0 | mug |") && out.contains("| mug | 1 |"), "{out}");
+    let o = irmirror(&["bench", "objects", "--seeds", "0"]);
+    assert!(!o.status.success() && stderr(&o).contains("--seeds"), "{}", stderr(&o));
 }
 
 fn read_tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
