@@ -87,7 +87,6 @@ pub fn run(preset: Preset, seeds: u64, segment: bool) -> Result<()> {
     println!("\nmedian / 90th percentile / max (goals: ≤ 5 mm, ≤ 3°, ≤ 3 %, ≤ 2 s per object)\n");
     println!("| object | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|");
     let mut categories: Vec<&str> = rows.iter().map(|r| r.category).collect();
-    categories.dedup();
     categories.sort();
     categories.dedup();
     for c in categories {

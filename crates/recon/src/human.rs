@@ -3,10 +3,11 @@
 //!
 //! Parameters per hypothesis: root translation `t` (depth frame, m), root rotation
 //! `R = exp(ω) B` (`B` the initial orientation), pose latent `z` (32, the pose prior), shape
-//! fixed at the mean adult ([`mean_adult`]). Loss: `1 − soft IoU` between the soft occupancy of sampled reflected
-//! rays and the observed mask, plus `w_prior ‖z‖²`, an upright prior, and — where the floor is
-//! known (below a table, or the ground a car stands on) — the body's lowest point on it. Gradients: occupancy backward → vertices →
-//! body backward → rotations → pose prior VJP (all analytic; see the crates' FD tests).
+//! fixed at the mean adult ([`mean_adult`]). Loss: `1 − soft IoU` between the soft occupancy of
+//! sampled reflected rays and the observed mask, plus `w_prior ‖z‖²`, an upright prior, and —
+//! where the floor is known (below a table, or the ground a car stands on) — the body's lowest
+//! point on it. Gradients: occupancy backward → vertices → body backward → rotations → pose
+//! prior VJP (all analytic; see the crates' FD tests).
 //!
 //! * **Edge sampling.** Each iteration draws `rays_per_iteration` rays without replacement with
 //!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
@@ -15,9 +16,8 @@
 //! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
 //! * **Initialisations.** `inits` hypotheses, run in parallel: root on the mean reflected ray of
 //!   the mask at distances log-spaced over `init_distance_m` (then standing on the floor, when
-//!   it is known), upright on the support plane, facing
-//!   the objects give or take 60°, pose latent 0 for the first and prior samples (×0.5) for the
-//!   rest. The best by final full-ray loss is kept; the `top_k` distinct ones are reported.
+//!   it is known), upright on the support plane, facing the objects give or take 60°, pose
+//!   latent 0 for the first and prior samples (×0.5) for the rest. The best by final full-ray loss is kept; the `top_k` distinct ones are reported.
 
 use crate::ReconError;
 use irmirror_body::prior::PosePrior;

@@ -341,9 +341,11 @@ impl Problem<'_> {
         if self.cfg.w_depth > 0.0 && self.cfg.depth_rays > 0 {
             let stride = self.obs.surface.len().div_ceil(self.cfg.depth_rays).max(1);
             let wd = self.cfg.w_depth * stride as f64 / self.obs.surface.len() as f64;
+            let camera = r.tr_mul(&(-t)) / s; // the depth camera's centre, object frame
             for p in self.obs.surface.iter().step_by(stride) {
                 let (t_meas, ray) = (p.norm(), p.normalize());
-                let Some((t_hit, x)) = render_depth(sdf, st, &ray) else { continue };
+                let Some(t_obj) = render_depth(sdf, &camera, &r.tr_mul(&ray)) else { continue };
+                let (t_hit, x) = (t_obj * s, ray * (t_obj * s));
                 let q = r.tr_mul(&(x - t)) / s;
                 let gq = sdf.gradient(&q);
                 let u = r * gq;
@@ -468,15 +470,12 @@ fn upright(n: &Vector3<f64>, yaw: f64) -> Matrix3<f64> {
 /// Rays meeting the surface at a normal-incidence cosine below this are not rendered.
 const GRAZING_COS: f64 = 0.2;
 
-/// Sphere-traces the unit ray `ray` from the depth camera's centre into the object `sdf` placed
-/// by `st`: the hit distance (metres) and point (depth frame), or `None` on a miss. Marches to
-/// 1e-7 object units (a depth error far below the sensor's), 200 steps at most.
-fn render_depth(sdf: &dyn Sdf, st: &State, ray: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
-    let s = st.log_scale.exp();
-    let o = st.rotation.tr_mul(&(-st.translation)) / s;
-    let d = st.rotation.tr_mul(ray);
+/// Sphere-traces the unit ray `d` from `o` (both in the object frame) into `sdf`: the hit
+/// distance (object units), or `None` on a miss. Marches to 1e-7 object units (a depth error
+/// far below the sensor's), 200 steps at most.
+fn render_depth(sdf: &dyn Sdf, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
     let radius = sdf.bounding_radius();
-    let b = o.dot(&d);
+    let b = o.dot(d);
     let disc = b * b - (o.norm_squared() - radius * radius);
     if disc < 0.0 {
         return None;
@@ -485,7 +484,7 @@ fn render_depth(sdf: &dyn Sdf, st: &State, ray: &Vector3<f64>) -> Option<(f64, V
     for _ in 0..200 {
         let dist = sdf.distance(&(o + d * t));
         if dist.abs() < 1e-7 {
-            return Some((t * s, ray * (t * s)));
+            return Some(t);
         }
         t += dist;
         if t > t_exit {
@@ -619,47 +618,35 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
     if missing > 0 && !plane.found {
         return Err(ReconError::NoSupportPlane);
     }
-    let mut clusters = if missing > 0 { crate::segment::segment(&points, depth.width, depth.height, &plane, &given, &cfg.segment) } else { vec![] };
+    // (mask, the cluster it was split from), largest first.
+    let mut clusters: Vec<(Image<bool>, usize)> =
+        if missing > 0 { crate::segment::segment(&points, depth.width, depth.height, &plane, &given, &cfg.segment).into_iter().enumerate().map(|(g, m)| (m, g)).collect() } else { vec![] };
     // Touching objects join into one cluster: split the largest until there are enough (or
-    // none can be split). `group[k]`: the cluster that cluster k was split from.
-    let mut group: Vec<usize> = (0..clusters.len()).collect();
+    // none can be split).
     while clusters.len() < missing
-        && let Some((a, b)) = clusters.first().and_then(|c| crate::segment::split(&points, c, &plane, &cfg.segment))
+        && let Some((a, b)) = clusters.first().and_then(|(c, _)| crate::segment::split(&points, c, &plane, &cfg.segment))
     {
-        clusters.remove(0);
-        let g = group.remove(0);
-        clusters.extend([a, b]);
-        group.extend([g, g]);
-        let size = |m: &Image<bool>| m.data.iter().filter(|&&v| v).count();
-        let mut order: Vec<usize> = (0..clusters.len()).collect();
-        order.sort_by_key(|&k| std::cmp::Reverse(size(&clusters[k])));
-        clusters = order.iter().map(|&k| clusters[k].clone()).collect();
-        group = order.iter().map(|&k| group[k]).collect();
+        let (_, g) = clusters.remove(0);
+        clusters.extend([(a, g), (b, g)]);
+        clusters.sort_by_cached_key(|(m, _)| std::cmp::Reverse(m.data.iter().filter(|&&v| v).count()));
     }
     if clusters.len() < missing {
         return Err(ReconError::Segmentation { wanted: missing, found: clusters.len() });
     }
-    clusters.truncate(missing);
-    group.truncate(missing);
-    let mut clusters = clusters.into_iter().zip(group);
-    let mut masks = Vec::new();
-    let mut segmented = Vec::new();
-    let mut groups = Vec::new();
-    for o in &capture.objects {
-        match &o.mask {
-            Some(m) => {
-                masks.push(m.clone());
-                segmented.push(false);
-                groups.push(None);
-            }
+    let mut clusters = clusters.into_iter();
+    // Per capture object: its mask, and for segmented ones the cluster it came from.
+    let (mut masks, groups): (Vec<Image<bool>>, Vec<Option<usize>>) = capture
+        .objects
+        .iter()
+        .map(|o| match &o.mask {
+            Some(m) => (m.clone(), None),
             None => {
                 let (m, g) = clusters.next().expect("one cluster per object without a mask");
-                masks.push(m);
-                segmented.push(true);
-                groups.push(Some(g));
+                (m, Some(g))
             }
-        }
-    }
+        })
+        .unzip();
+    let segmented: Vec<bool> = groups.iter().map(Option::is_some).collect();
     // Segmented clusters come largest first, not in capture order: give each cluster the
     // family (among the mask-less objects' categories) that fits it best.
     let mut options: Vec<Family> = Vec::new();
@@ -680,11 +667,12 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
     }
     // Objects split from one cluster: the split's straight cut is only a first guess. Give every
     // point of the cluster to the fitted surface nearest to it, and refit on those masks.
-    let mut done = vec![false; masks.len()];
-    for k in 0..masks.len() {
-        let Some(g) = groups[k] else { continue };
+    let mut split_from: Vec<usize> = groups.iter().flatten().copied().collect();
+    split_from.sort_unstable();
+    split_from.dedup();
+    for g in split_from {
         let members: Vec<usize> = (0..masks.len()).filter(|&j| groups[j] == Some(g)).collect();
-        if members.len() < 2 || done[k] {
+        if members.len() < 2 {
             continue;
         }
         let placed: Vec<PlacedSdf> = members.iter().map(|&j| objects[j].placed()).collect();
@@ -698,10 +686,8 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
             }
         }
         for (&j, m) in members.iter().zip(new) {
-            done[j] = true;
             let Ok(obs) = observe(depth, cam, &m, &cfg.fit) else { continue };
-            let family = Family::of(&objects[j].category)?;
-            objects[j] = fit_family(family, &obs, &plane, &cfg.fit);
+            objects[j] = fit_family(Family::of(&objects[j].category)?, &obs, &plane, &cfg.fit);
             masks[j] = m;
         }
     }
@@ -730,17 +716,19 @@ mod tests {
     fn rendered_depth_is_the_ray_sphere_intersection() {
         let st = State { rotation: axis_angle_to_matrix(&Vector3::new(0.3, -0.2, 0.5)), translation: Vector3::new(0.05, -0.02, 0.8), log_scale: 0.1f64.ln(), u: [0.0; 2] };
         let sdf = Family::Sphere.shape(&[]).sdf();
+        let s = st.log_scale.exp();
+        let camera = st.rotation.tr_mul(&(-st.translation)) / s;
         for (k, target) in [Vector3::new(0.05, -0.02, 0.8), Vector3::new(0.12, 0.03, 0.8), Vector3::new(-0.2, 0.0, 0.8)].iter().enumerate() {
             let ray = target.normalize();
             let (c, r) = (st.translation, 0.1);
             let b = ray.dot(&c);
             let disc = b * b - (c.norm_squared() - r * r);
-            let got = render_depth(sdf.as_ref(), &st, &ray);
+            let got = render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&ray));
             if disc < 0.0 {
                 assert!(got.is_none(), "ray {k} misses the sphere but rendered {got:?}");
             } else {
-                let (t, x) = got.unwrap_or_else(|| panic!("ray {k} hits the sphere"));
-                assert!((t - (b - disc.sqrt())).abs() < 1e-7 && ((x - c).norm() - r).abs() < 1e-7, "ray {k}: t {t}, closed form {}", b - disc.sqrt());
+                let t = got.unwrap_or_else(|| panic!("ray {k} hits the sphere")) * s;
+                assert!((t - (b - disc.sqrt())).abs() < 1e-7 && ((ray * t - c).norm() - r).abs() < 1e-7, "ray {k}: t {t}, closed form {}", b - disc.sqrt());
             }
         }
     }
@@ -774,7 +762,9 @@ mod tests {
         // The rendered-depth term is active: most sampled rays hit and are not grazing.
         let no_depth = ObjectConfig { w_depth: 0.0, ..cfg };
         let without = Problem { cfg: &no_depth, ..problem };
-        let hits = obs.surface.iter().filter(|p| render_depth(family.shape(&st.u).sdf().as_ref(), &st, &p.normalize()).is_some()).count();
+        let (sdf, s) = (family.shape(&st.u).sdf(), st.log_scale.exp());
+        let camera = st.rotation.tr_mul(&(-st.translation)) / s;
+        let hits = obs.surface.iter().filter(|p| render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&p.normalize())).is_some()).count();
         let mut g0 = Grad { rot: Vector3::zeros(), t: Vector3::zeros(), log_s: 0.0 };
         let base = without.eval(&st, Some(&mut g0));
         let share = ((g.t - g0.t).norm() + (g.rot - g0.rot).norm()) / (g.t.norm() + g.rot.norm());

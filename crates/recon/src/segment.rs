@@ -94,7 +94,8 @@ pub fn segment(points: &[Option<Vector3<f64>>], width: u32, height: u32, plane: 
     // of `join_m` on the plane; neighbouring buckets are compared point by point.
     let n = plane.n();
     let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::z() };
-    let (e1, e2) = ((helper - n * n.dot(&helper)).normalize(), n.cross(&(helper - n * n.dot(&helper)).normalize()));
+    let e1 = (helper - n * n.dot(&helper)).normalize();
+    let e2 = n.cross(&e1);
     let cell = |p: &Vector3<f64>| ((e1.dot(p) / cfg.join_m).floor() as i64, (e2.dot(p) / cfg.join_m).floor() as i64);
     let mut buckets: std::collections::HashMap<(i64, i64), Vec<u32>> = Default::default();
     for (i, p) in points.iter().enumerate() {

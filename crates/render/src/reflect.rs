@@ -191,14 +191,20 @@ mod tests {
     use nalgebra::Matrix3;
     use std::sync::Arc;
 
-    #[test]
-    fn mirror_sphere_reflection_matches_closed_form() {
-        // Sphere of radius 0.15 m at (0, 0, 0.5): for a camera ray hitting p, n = (p − c)/ρ and
-        // the reflection is r − 2 (r·n) n; check point, direction, and the law of reflection.
+    /// A mirror sphere of radius 0.15 m at (0, 0, 0.5), a 32×24 camera at the origin looking at
+    /// it, and trace settings tight enough for closed-form comparisons.
+    fn mirror_sphere() -> (Vector3<f64>, PlacedSdf, PinholeCamera, TraceParams) {
         let c = Vector3::new(0.0, 0.0, 0.5);
         let obj = PlacedSdf { sdf: Arc::new(Sphere { radius: 1.0 }), depth_from_object: Similarity3::new(Matrix3::identity(), c, 0.15).unwrap() };
         let cam = PinholeCamera { width: 32, height: 24, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 };
-        let tight = TraceParams { coarse_tol_rel: 1e-9, max_iters: 4000, ..TraceParams::default() };
+        (c, obj, cam, TraceParams { coarse_tol_rel: 1e-9, max_iters: 4000, ..TraceParams::default() })
+    }
+
+    #[test]
+    fn mirror_sphere_reflection_matches_closed_form() {
+        // For a camera ray hitting p, n = (p − c)/ρ and the reflection is r − 2 (r·n) n; check
+        // point, direction, and the law of reflection.
+        let (c, obj, cam, tight) = mirror_sphere();
         let rays = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, Normals::Raw);
         assert!(rays.len() > 50);
         for i in 0..rays.len() {
@@ -224,10 +230,7 @@ mod tests {
     /// and one far from the sphere, get none.
     #[test]
     fn footprint_rays_match_the_closed_form() {
-        let c = Vector3::new(0.0, 0.0, 0.5);
-        let obj = PlacedSdf { sdf: Arc::new(Sphere { radius: 1.0 }), depth_from_object: Similarity3::new(Matrix3::identity(), c, 0.15).unwrap() };
-        let cam = PinholeCamera { width: 32, height: 24, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 };
-        let tight = TraceParams { coarse_tol_rel: 1e-9, max_iters: 4000, ..TraceParams::default() };
+        let (c, obj, cam, tight) = mirror_sphere();
         let centres = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, Normals::Raw);
         // The sphere's silhouette radius in pixels: 30 · tan(asin(0.15 / 0.5)) ≈ 9.43, so on
         // row 12 (through the centre) column 16 + 9 = 25 has its centre 9.5 px out (a miss)
