@@ -46,6 +46,50 @@ impl TriMesh {
         }))
     }
 
+    /// The connected component (triangles sharing vertices) with the largest |signed volume|,
+    /// unused vertices dropped: removes the small floating pieces a learned field can leave far
+    /// from its data.
+    pub fn largest_component(&self) -> TriMesh {
+        let n = self.vertices.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn find(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        for t in &self.triangles {
+            let a = find(&mut parent, t[0] as usize);
+            for &v in &t[1..] {
+                let b = find(&mut parent, v as usize);
+                parent[b] = a;
+            }
+        }
+        let mut volume = std::collections::HashMap::new();
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.vertices[i as usize].map(f64::from));
+            let v = (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+            *volume.entry(find(&mut parent, t[0] as usize)).or_insert(0.0) += v;
+        }
+        let Some(keep) = volume.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map(|(k, _)| *k) else { return TriMesh::default() };
+        let mut index = vec![u32::MAX; n];
+        let mut out = TriMesh::default();
+        for t in &self.triangles {
+            if find(&mut parent, t[0] as usize) != keep {
+                continue;
+            }
+            out.triangles.push(t.map(|i| {
+                if index[i as usize] == u32::MAX {
+                    index[i as usize] = out.vertices.len() as u32;
+                    out.vertices.push(self.vertices[i as usize]);
+                }
+                index[i as usize]
+            }));
+        }
+        out
+    }
+
     /// Signed volume (m³): positive for a closed mesh with outward CCW triangles.
     pub fn signed_volume(&self) -> f64 {
         self.triangles
@@ -127,6 +171,21 @@ pub fn unit_cube() -> TriMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn largest_component_drops_the_smaller_piece() {
+        let big = unit_cube();
+        let mut small = unit_cube();
+        small.map_vertices(|v| v.map(|x| 0.1 * x + 5.0));
+        let mut both = small.clone();
+        let off = both.vertices.len() as u32;
+        both.vertices.extend(&big.vertices);
+        both.triangles.extend(big.triangles.iter().map(|t| t.map(|i| i + off)));
+        let kept = both.largest_component();
+        assert_eq!((kept.vertices.len(), kept.triangles.len()), (big.vertices.len(), big.triangles.len()));
+        assert_eq!(kept.bounds(), big.bounds(), "the unit cube is kept");
+        assert!((kept.signed_volume() - 1.0).abs() < 1e-12);
+    }
 
     #[test]
     fn cube_volume_bounds_and_validation() {

@@ -179,8 +179,8 @@ fn touching_objects_are_separated() {
     // below the depth camera's 3 mm pixels).
     let gap = unit_radius(&a) * sa + unit_radius(&b) * sb - 0.002;
     sc.objects = vec![
-        irmirror_sim::scene::SceneObject { shape: a, base_m: [-0.08, -0.05, 0.75], scale_m: sa, ..template.clone() },
-        irmirror_sim::scene::SceneObject { shape: b, base_m: [-0.08 + gap, -0.05, 0.75], scale_m: sb, ..template },
+        irmirror_sim::scene::SceneObject { shape: a.into(), base_m: [-0.08, -0.05, 0.75], scale_m: sa, ..template.clone() },
+        irmirror_sim::scene::SceneObject { shape: b.into(), base_m: [-0.08 + gap, -0.05, 0.75], scale_m: sb, ..template },
     ];
     let (dir, truth) = write("touch", &sc, seed);
     let cap = Capture::load(&dir).unwrap();

@@ -21,6 +21,7 @@ pub mod net;
 pub mod train;
 pub mod infer;
 pub mod quality;
+pub mod placed;
 
 pub use families::{Category, FamilyShape};
 pub use mesh_sdf::{MeshSdf, SdfSamples};

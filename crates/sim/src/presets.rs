@@ -16,6 +16,18 @@ pub enum Preset {
     Car,
 }
 
+/// Which shape families a preset's objects come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shapes {
+    /// The renderer's two-parameter shapes ([`crate::shapes::Shape`]).
+    #[default]
+    Simple,
+    /// The richer procedural families the learned object priors were trained on
+    /// (`irmirror_sdf::families`), each object about the size the simple preset would draw.
+    Family,
+}
+
 /// Presets redraw their scene (up to this many times) until the person's reflection covers at
 /// least [`MIN_REFLECTION_PIXELS`] thermal pixels: small tabletop reflectors often show none.
 pub const ATTEMPTS: u64 = 40;
@@ -26,6 +38,24 @@ pub const MIN_REFLECTION_PIXELS: usize = 12;
 /// successive streams and keeps the first with ≥ [`MIN_REFLECTION_PIXELS`] reflection pixels
 /// (or the last drawn).
 pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: ThermalPreset, seed: u64) -> Result<SceneFile, SimError> {
+    preset_scene_with(model, preset, thermal, Shapes::Simple, seed)
+}
+
+/// [`preset_scene`] with the objects' shapes drawn from `shapes`.
+pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: ThermalPreset, shapes: Shapes, seed: u64) -> Result<SceneFile, SimError> {
+    let draw_scene = |model: &BodyModel, preset: Preset, thermal: ThermalPreset, seed: u64, attempt: u64| {
+        let mut scene = draw_scene(model, preset, thermal, seed, attempt);
+        if shapes == Shapes::Family {
+            // Its own stream: the rest of the scene is the simple preset's, draw for draw.
+            let mut rng = irmirror_geom::rng::seeded(seed, 2000 + attempt);
+            for o in &mut scene.objects {
+                if let Some((shape, scale_m)) = o.shape.family_like(o.scale_m, &mut rng) {
+                    (o.shape, o.scale_m) = (shape, scale_m);
+                }
+            }
+        }
+        scene
+    };
     let mut scene = draw_scene(model, preset, thermal, seed, 0);
     for attempt in 1..ATTEMPTS {
         let mut probe = scene.clone();

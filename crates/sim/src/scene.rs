@@ -5,6 +5,9 @@
 //! before rendering.
 
 use crate::shapes::Shape;
+use irmirror_render::sdf::Sdf;
+use irmirror_sdf::{Category, FamilyShape};
+use std::sync::Arc;
 use irmirror_body::Phenotype;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_geom::transform::RigidFile;
@@ -78,12 +81,84 @@ pub struct Table {
     pub emissivity: f64,
 }
 
+/// An object's shape: a member of the renderer's two-parameter families, or of the richer
+/// procedural families the learned object priors were trained on (`irmirror_sdf::families`:
+/// tapered mugs with varied handles, flared bowls with feet, sedans to SUVs). In a scene file both
+/// are a table with a `category`; the parameter names tell them apart.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(untagged, expecting = "an object shape: `category` and its parameters (bowl: cut, wall; mug: aspect, wall; car: cabin, height; or the parameters of an irmirror_sdf::families shape)")]
+pub enum ObjectShape {
+    /// [`Shape`] (normalised to the unit sphere).
+    Simple(Shape),
+    /// [`FamilyShape`] (normalised: bounding-box half-diagonal 0.9).
+    Family(FamilyShape),
+}
+
+impl From<Shape> for ObjectShape {
+    fn from(s: Shape) -> Self {
+        ObjectShape::Simple(s)
+    }
+}
+
+impl ObjectShape {
+    /// The category name used in captures.
+    pub fn category(&self) -> &'static str {
+        match self {
+            ObjectShape::Simple(s) => s.category(),
+            ObjectShape::Family(f) => f.category().name(),
+        }
+    }
+
+    /// The signed distance field (object frame, +Y up).
+    pub fn sdf(&self) -> Arc<dyn Sdf> {
+        match self {
+            ObjectShape::Simple(s) => s.sdf(),
+            ObjectShape::Family(f) => Arc::new(f.prepare()),
+        }
+    }
+
+    /// Lowest object-frame y of the surface.
+    pub fn base_y(&self) -> f64 {
+        match self {
+            ObjectShape::Simple(s) => s.base_y(),
+            ObjectShape::Family(f) => {
+                let (lo, _) = f.raw_bounds();
+                let (centre, k) = f.normalisation();
+                (lo.y - centre.y) / k
+            }
+        }
+    }
+
+    /// A family member of the same category and about the same metric size (widest horizontal
+    /// radius; a car's length), drawn from the family's documented ranges; returns the shape and
+    /// its `scale_m`. `None` for categories without a family (the sphere).
+    pub fn family_like(&self, scale_m: f64, rng: &mut impl Rng) -> Option<(ObjectShape, f64)> {
+        let ObjectShape::Simple(simple) = *self else { return Some((*self, scale_m)) };
+        // The simple shape's widest radius (or half length), metres.
+        let (category, half_m) = match simple {
+            Shape::Sphere => return None,
+            Shape::Bowl { wall, .. } => (Category::Bowl, 0.95 * (1.0 + 0.5 * wall) * scale_m),
+            Shape::Mug { aspect, .. } => (Category::Mug, 0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2 * scale_m),
+            Shape::Car { .. } => (Category::Car, 0.95 * scale_m),
+        };
+        let family = FamilyShape::sample(category, rng);
+        let (_, k) = family.normalisation();
+        // The family's widest radius (half length) in raw units.
+        let raw_half = match family {
+            FamilyShape::Bowl(b) => 1.0 + b.flare + 0.5 * b.wall,
+            FamilyShape::Mug(m) => 1.0 + m.taper.max(0.0),
+            FamilyShape::Car(_) => 1.0,
+        };
+        Some((ObjectShape::Family(family), half_m / raw_half * k))
+    }
+}
+
 /// A reflecting object.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SceneObject {
     /// Shape and parameters.
-    pub shape: Shape,
+    pub shape: ObjectShape,
     /// Base centre (x, y) and the height it stands on (z), world, m.
     pub base_m: [f64; 3],
     /// Rotation about the world Z axis, rad.
@@ -219,7 +294,7 @@ pub fn tabletop(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Ph
         if objects.iter().any(|o| ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt() < o.scale_m + scale + 0.02) {
             continue;
         }
-        objects.push(SceneObject { shape, base_m: base, yaw_rad: rng.random_range(-3.1..3.1), scale_m: scale, emissivity: 0.91, temp_c: 22.0 });
+        objects.push(SceneObject { shape: shape.into(), base_m: base, yaw_rad: rng.random_range(-3.1..3.1), scale_m: scale, emissivity: 0.91, temp_c: 22.0 });
     }
     // The person stands behind the cameras (so only reflections show them), 1–3 m from the table.
     let dist = rng.random_range(0.5..1.5);
@@ -255,7 +330,7 @@ fn assemble(ambient_c: f64, world_from_depth: &Rigid3<f64>, world_from_third: &R
 pub fn car(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenotype, thermal: ThermalPreset) -> SceneFile {
     let length = 4.5;
     let car = SceneObject {
-        shape: Shape::Car { cabin: rng.random_range(0.45..0.7), height: rng.random_range(0.28..0.36) },
+        shape: Shape::Car { cabin: rng.random_range(0.45..0.7), height: rng.random_range(0.28..0.36) }.into(),
         base_m: [0.0, 0.0, 0.0],
         yaw_rad: 0.0,
         scale_m: length / 1.9,

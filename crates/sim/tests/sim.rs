@@ -41,7 +41,7 @@ fn perfect_mirror_shows_the_person_where_the_hard_renderer_says() {
     let mut s = small_scene();
     s.table = None;
     s.objects = vec![irmirror_sim::scene::SceneObject {
-        shape: irmirror_sim::shapes::Shape::Sphere,
+        shape: irmirror_sim::shapes::Shape::Sphere.into(),
         base_m: [0.0, -0.05, 0.75],
         yaw_rad: 0.0,
         scale_m: 0.12,
