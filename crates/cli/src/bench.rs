@@ -39,6 +39,12 @@ pub enum BenchCommand {
         /// Ignore the capture's object masks and segment the depth image instead.
         #[arg(long)]
         segment: bool,
+        /// Shape families of the simulated objects.
+        #[arg(long, value_enum, default_value = "simple")]
+        shapes: crate::simulate_cmd::ShapeSet,
+        /// The prior stage 1 fits: the two-parameter family, or then the learned DeepSDF prior.
+        #[arg(long, value_enum, default_value = "simple")]
+        prior: PriorArg,
     },
     /// Body model: shape, forward (FK + LBS + keypoints) and backward, in f32.
     Body {
@@ -46,6 +52,24 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 200)]
         reps: usize,
     },
+}
+
+/// Stage 1's shape prior.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum PriorArg {
+    /// The renderer's two-parameter family of the category.
+    Simple,
+    /// The family fit, then the learned DeepSDF prior's latent and placement.
+    Learned,
+}
+
+impl From<PriorArg> for irmirror_recon::objects::ObjectPrior {
+    fn from(p: PriorArg) -> Self {
+        match p {
+            PriorArg::Simple => Self::Simple,
+            PriorArg::Learned => Self::Learned,
+        }
+    }
 }
 
 pub(crate) fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
@@ -65,7 +89,7 @@ pub(crate) fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
         BenchCommand::Render { scene, reps, no_dense, epsilon } => crate::bench_render::run(&scene, reps, no_dense, &epsilon),
-        BenchCommand::Objects { preset, seeds, segment } => crate::bench_objects::run(preset, seeds, segment),
+        BenchCommand::Objects { preset, seeds, segment, shapes, prior } => crate::bench_objects::run(preset, shapes.into(), prior.into(), seeds, segment),
         BenchCommand::Body { reps } => {
             let model = BodyModel::builtin()?;
             let z: Vec<f32> = model.shape_coefficients(&Phenotype::default())?.iter().map(|&x| x as f32).collect();

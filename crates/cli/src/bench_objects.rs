@@ -1,14 +1,21 @@
 //! `irmirror bench objects`: stage 1 against the simulator's truth over many seeds (issue 7's
 //! figure): translation, up-axis and (for mugs, whose handle breaks the symmetry) full rotation
 //! error, scale error, Chamfer distance to the true mesh, and time per object.
+//!
+//! Position and size are those of the surfaces, not of the frames (a learned prior's frame is
+//! its own, and its latent can absorb a little scale): translation is the distance between the
+//! centres of the fitted and the true mesh's bounding boxes (each in its object's axes), scale
+//! the ratio of their half-diagonals.
 
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_capture::Capture;
 use irmirror_geom::Similarity3;
 use irmirror_geom::nalgebra::Vector3;
-use irmirror_recon::objects::{Stage1Config, reconstruct_objects};
-use crate::simulate_cmd::{Preset, Thermal, preset_scene};
+use irmirror_geom::TriMesh;
+use irmirror_recon::objects::{ObjectPrior, Stage1Config, reconstruct_objects};
+use irmirror_sim::presets::Shapes;
+use crate::simulate_cmd::{Preset, Thermal, preset_scene_with};
 use std::time::Instant;
 
 /// One fitted object against its truth.
@@ -24,25 +31,40 @@ struct Row {
     time_s: f64,
 }
 
-fn errors(fit: &Similarity3<f64>, truth: &Similarity3<f64>) -> (f64, f64, f64, f64) {
-    let t = (fit.translation - truth.translation).norm() * 1e3;
+/// Centre (depth frame) and half-diagonal (metres) of a depth-frame mesh's bounding box in the
+/// axes of `frame` (an object frame): robust to the holes marching leaves in thin walls.
+fn box_in_frame(m: &TriMesh, frame: &Similarity3<f64>) -> (Vector3<f64>, f64) {
+    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    for v in &m.vertices {
+        let q = frame.rotation.tr_mul(&Vector3::from(v.map(f64::from)));
+        lo = lo.inf(&q);
+        hi = hi.sup(&q);
+    }
+    (frame.rotation * (lo + hi) / 2.0, (hi - lo).norm() / 2.0)
+}
+
+/// Translation (mm), up-axis (°), full rotation (°) and scale (%) errors.
+fn errors(fit: &Similarity3<f64>, fit_mesh: &TriMesh, truth: &Similarity3<f64>, true_mesh: &TriMesh) -> (f64, f64, f64, f64) {
+    let ((cf, rf), (ct, rt)) = (box_in_frame(fit_mesh, fit), box_in_frame(true_mesh, truth));
     let up = (fit.rotation * Vector3::y()).angle(&(truth.rotation * Vector3::y())).to_degrees();
     let d = fit.rotation * truth.rotation.transpose();
     let full = ((d.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
-    (t, up, full, (fit.scale / truth.scale - 1.0).abs() * 100.0)
+    ((cf - ct).norm() * 1e3, up, full, (rf / rt - 1.0).abs() * 100.0)
 }
 
-/// Simulates `seeds` captures of `preset`, runs stage 1 on each (masks as the capture gives
-/// them, or segmentation with `segment`), prints one row per object and a summary per category.
-pub fn run(preset: Preset, seeds: u64, segment: bool) -> Result<()> {
+/// Simulates `seeds` captures of `preset` (objects from `shapes`), runs stage 1 with `prior` on
+/// each (masks as the capture gives them, or segmentation with `segment`), prints one row per
+/// object and a summary per category.
+pub fn run(preset: Preset, shapes: Shapes, prior: ObjectPrior, seeds: u64, segment: bool) -> Result<()> {
     let model = BodyModel::builtin()?;
-    let cfg = Stage1Config::default();
+    let mut cfg = Stage1Config::default();
+    cfg.fit.prior = prior;
     let scratch = std::env::temp_dir().join(format!("irmirror-bench-objects-{}", std::process::id()));
     let bar = indicatif::ProgressBar::new(seeds);
     bar.set_style(indicatif::ProgressStyle::with_template("bench objects {bar:40} {pos}/{len} captures {elapsed}/{eta}").expect("valid template"));
     let mut rows = Vec::new();
     for seed in 0..seeds {
-        let scene = preset_scene(&model, preset, Thermal::Lepton, seed)?;
+        let scene = preset_scene_with(&model, preset, Thermal::Lepton, shapes, seed)?;
         let sim = irmirror_sim::simulate(&model, &scene, seed)?;
         let dir = scratch.join(format!("{seed}"));
         sim.write(&model, &dir, seed)?;
@@ -61,7 +83,8 @@ pub fn run(preset: Preset, seeds: u64, segment: bool) -> Result<()> {
                 &objects.objects[k]
             };
             let category = scene.objects[k].shape.category();
-            let (t, up, full, s) = errors(&fit.depth_from_object, truth);
+            let fit_mesh = crate::result::object_mesh(fit)?;
+            let (t, up, full, s) = errors(&fit.depth_from_object, &fit_mesh, truth, true_mesh);
             rows.push(Row {
                 seed,
                 category,
@@ -69,7 +92,7 @@ pub fn run(preset: Preset, seeds: u64, segment: bool) -> Result<()> {
                 up_deg: up,
                 rotation_deg: (category == "mug").then_some(full),
                 scale_pct: s,
-                chamfer_mm2: irmirror_sdf::quality::chamfer(&crate::result::object_mesh(fit), true_mesh, 5000, 0) * 1e6,
+                chamfer_mm2: irmirror_sdf::quality::chamfer(&fit_mesh, true_mesh, 5000, 0) * 1e6,
                 time_s,
             });
         }
@@ -78,7 +101,7 @@ pub fn run(preset: Preset, seeds: u64, segment: bool) -> Result<()> {
     }
     bar.finish_and_clear();
     std::fs::remove_dir_all(&scratch).ok();
-    println!("stage 1 on the {preset:?} preset, seeds 0–{}, {} objects, masks {}, {} threads", seeds.saturating_sub(1), rows.len(), if segment { "segmented" } else { "given" }, rayon::current_num_threads());
+    println!("stage 1 ({prior:?} prior) on the {preset:?} preset ({shapes:?} shapes), seeds 0–{}, {} objects, masks {}, {} threads", seeds.saturating_sub(1), rows.len(), if segment { "segmented" } else { "given" }, rayon::current_num_threads());
     println!("\n| seed | object | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|");
     for r in &rows {
         let rot = r.rotation_deg.map_or("–".to_string(), |x| format!("{x:.1}"));
@@ -119,6 +142,21 @@ fn stats(mut v: Vec<f64>) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn box_in_a_rotated_frame() {
+        use irmirror_geom::nalgebra::{Matrix3, Vector3};
+        let mut cube = irmirror_geom::mesh::unit_cube();
+        let frame = irmirror_geom::Similarity3 { rotation: irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::new(0.3, -0.5, 0.2)), translation: Vector3::new(1.0, 2.0, 3.0), scale: 2.0 };
+        // The cube [0, 1]³ in the frame's axes, shifted by (1, 2, 3).
+        cube.map_vertices(|v| (frame.rotation * Vector3::from(v.map(f64::from)) + frame.translation).map(|x| x as f32).into());
+        let (c, r) = super::box_in_frame(&cube, &frame);
+        assert!((c - (frame.rotation * Vector3::repeat(0.5) + frame.translation)).norm() < 1e-5, "{c}");
+        assert!((r - 3f64.sqrt() / 2.0).abs() < 1e-5, "{r}");
+        // In the camera's axes the same cube's box is larger.
+        let (_, r_axis) = super::box_in_frame(&cube, &irmirror_geom::Similarity3 { rotation: Matrix3::identity(), ..frame });
+        assert!(r_axis > r + 0.05);
+    }
+
     #[test]
     fn stats_are_order_statistics() {
         assert_eq!(super::stats(vec![3.0, 1.0, 2.0]), "2.00 / 3.00 / 3.00");

@@ -264,7 +264,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
                 continue;
             }
         };
-        result.object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| chamfer_mm2(&crate::result::object_mesh(o), m)).collect();
+        result.object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| Ok(chamfer_mm2(&crate::result::object_mesh(o)?, m))).collect::<Result<_>>()?;
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs)?;
         for &(name, ablation) in &variants {

@@ -63,6 +63,9 @@ enum Command {
         /// Thermal camera preset (ignored with --scene).
         #[arg(long, value_enum, default_value = "lepton")]
         thermal: simulate_cmd::Thermal,
+        /// Shape families of the preset's objects (ignored with --scene).
+        #[arg(long, value_enum, default_value = "simple")]
+        shapes: simulate_cmd::ShapeSet,
         /// Output capture directory.
         #[arg(long)]
         out: PathBuf,
@@ -189,11 +192,11 @@ enum Command {
     },
 }
 
-fn simulate(preset: simulate_cmd::Preset, scene: Option<PathBuf>, thermal: simulate_cmd::Thermal, out: &std::path::Path, seed: u64) -> anyhow::Result<()> {
+fn simulate(preset: simulate_cmd::Preset, scene: Option<PathBuf>, thermal: simulate_cmd::Thermal, shapes: simulate_cmd::ShapeSet, out: &std::path::Path, seed: u64) -> anyhow::Result<()> {
     let model = irmirror_body::BodyModel::builtin()?;
     let scene = match scene {
         Some(p) => simulate_cmd::load_scene(&p)?,
-        None => simulate_cmd::preset_scene(&model, preset, thermal, seed)?,
+        None => simulate_cmd::preset_scene_with(&model, preset, thermal, shapes.into(), seed)?,
     };
     let t0 = std::time::Instant::now();
     let (r, dir) = simulate_cmd::run(&model, &scene, out, seed)?;
@@ -230,7 +233,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Demo { out, seed } => demo::run(&out, seed, progress),
         Command::Body { command } => body_cmd::run(command, progress),
-        Command::Simulate { preset, scene, thermal, out, seed } => simulate(preset, scene, thermal, &out, seed),
+        Command::Simulate { preset, scene, thermal, shapes, out, seed } => simulate(preset, scene, thermal, shapes, &out, seed),
         Command::Bench { command } => bench::run(command),
         Command::Reconstruct { capture, out, stage, config, ablate, seed } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref(), &ablate, seed, progress),
         Command::Eval { preset, out, limit, category, full_only } => eval_cmd::run(preset, &out, &eval_cmd::Selection { limit, category, full_only }, progress),

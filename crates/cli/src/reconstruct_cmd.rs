@@ -127,7 +127,7 @@ pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, 
             let st = Staging::new(out, "run.toml")?;
             std::fs::create_dir_all(st.path("objects"))?;
             for (k, o) in objs.objects.iter().enumerate() {
-                let m = crate::result::object_mesh(o);
+                let m = crate::result::object_mesh(o)?;
                 m.write(&st.path(&format!("objects/object_{k}.ply")))?;
                 m.write(&st.path(&format!("objects/object_{k}.glb")))?;
                 mask_png(&objs.masks[k], &st.path(&format!("objects/object_{k}_mask.png")))?;

@@ -17,12 +17,8 @@ use irmirror_render::sdf::PlacedSdf;
 use irmirror_render::sphere_trace::{TraceParams, trace};
 
 /// A fitted object's surface as a mesh in the depth frame (marching tetrahedra, 64³).
-pub fn object_mesh(obj: &FittedObject) -> TriMesh {
-    let placed = obj.placed();
-    let s = &obj.depth_from_object;
-    let r = placed.sdf.bounding_radius() * s.scale * 1.05;
-    let c = s.translation;
-    irmirror_geom::isosurface::isosurface(|p| placed.distance(p), c - Vector3::repeat(r), c + Vector3::repeat(r), 64)
+pub fn object_mesh(obj: &FittedObject) -> Result<TriMesh> {
+    Ok(obj.mesh(64)?)
 }
 
 /// The posed body of a stage-2 state (mean adult shape), depth frame.
@@ -158,7 +154,7 @@ pub fn write(stage: &Staging, prefix: &str, capture: &Capture, rec: &Reconstruct
     mask_png(&pre.mask, &p("reflection_mask.png"))?;
     // Stage 1.
     for (k, o) in rec.objects.objects.iter().enumerate() {
-        let m = object_mesh(o);
+        let m = object_mesh(o)?;
         m.write(&p(&format!("objects/object_{k}.ply")))?;
         m.write(&p(&format!("objects/object_{k}.glb")))?;
         mask_png(&rec.objects.masks[k], &p(&format!("debug/object_{k}_mask.png")))?;

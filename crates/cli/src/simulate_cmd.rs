@@ -17,6 +17,25 @@ pub enum Preset {
     Car,
 }
 
+/// Which shape families the preset's objects come from.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ShapeSet {
+    /// The renderer's two-parameter bowls, mugs and cars.
+    Simple,
+    /// The richer procedural families the learned object priors were trained on (tapered mugs
+    /// with varied handles, flared bowls with feet, sedans to SUVs).
+    Family,
+}
+
+impl From<ShapeSet> for irmirror_sim::presets::Shapes {
+    fn from(s: ShapeSet) -> Self {
+        match s {
+            ShapeSet::Simple => Self::Simple,
+            ShapeSet::Family => Self::Family,
+        }
+    }
+}
+
 /// Thermal camera presets.
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Thermal {
@@ -29,6 +48,11 @@ pub enum Thermal {
 /// The scene for a preset and seed whose reflection is visible (see
 /// [`irmirror_sim::presets::preset_scene`]).
 pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u64) -> Result<SceneFile> {
+    preset_scene_with(model, preset, thermal, irmirror_sim::presets::Shapes::Simple, seed)
+}
+
+/// [`preset_scene`] with the objects drawn from `shapes`.
+pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: Thermal, shapes: irmirror_sim::presets::Shapes, seed: u64) -> Result<SceneFile> {
     let p = match preset {
         Preset::Tabletop => irmirror_sim::presets::Preset::Tabletop,
         Preset::Car => irmirror_sim::presets::Preset::Car,
@@ -37,7 +61,7 @@ pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u
         Thermal::Lepton => ThermalPreset::Lepton,
         Thermal::Boson => ThermalPreset::Boson,
     };
-    Ok(irmirror_sim::presets::preset_scene(model, p, t, seed)?)
+    Ok(irmirror_sim::presets::preset_scene_with(model, p, t, shapes, seed)?)
 }
 
 /// Simulates into `out` (atomically) and returns the figures.

@@ -62,6 +62,9 @@ pub enum ReconError {
     /// The body model or pose prior failed.
     #[error("body model / pose prior: {0}")]
     Prior(String),
+    /// A learned object prior failed (its weights, or its fit diverged).
+    #[error("object prior: {0}")]
+    ObjectPrior(#[from] irmirror_sdf::SdfError),
     /// No pixel on an object is warmer than the background by the threshold.
     #[error("no reflection: no object pixel is warmer than its background by {threshold_k:.3} K (largest rise {max_rise_k:.3} K)")]
     NoReflection {

@@ -38,7 +38,11 @@ use irmirror_capture::Image;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_geom::{PinholeCamera, Similarity3};
 use irmirror_render::sdf::{PlacedSdf, Sdf};
+use irmirror_geom::TriMesh;
 use irmirror_render::shapes::Shape;
+use irmirror_sdf::placed::{PlacedFitConfig, PlacedObservation, fit_placed};
+use irmirror_sdf::{Category, LatentSdf, SdfNet};
+use std::sync::Arc;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -154,6 +158,23 @@ pub struct ObjectConfig {
     pub w_depth: f64,
     /// Camera rays rendered for it (evenly subsampled from the surface points).
     pub depth_rays: usize,
+    /// Which prior is fitted: the two-parameter family alone, or then the learned DeepSDF prior.
+    pub prior: ObjectPrior,
+    /// The learned prior's fit (latent and placement together, from the family fit).
+    pub learned: PlacedFitConfig,
+}
+
+/// The shape prior stage 1 fits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObjectPrior {
+    /// The renderer's two-parameter family of the category ([`Family`]).
+    #[default]
+    Simple,
+    /// The family fit, then the category's learned DeepSDF prior (`assets/object_priors`):
+    /// its latent and the placement fitted together ([`irmirror_sdf::placed`]). Spheres keep
+    /// the family fit.
+    Learned,
 }
 
 impl Default for ObjectConfig {
@@ -173,6 +194,8 @@ impl Default for ObjectConfig {
             w_size: 1e-3,
             w_depth: 0.3,
             depth_rays: 200,
+            prior: ObjectPrior::Simple,
+            learned: PlacedFitConfig::default(),
         }
     }
 }
@@ -196,6 +219,25 @@ pub struct FittedObject {
     /// Loss after every iteration of the kept restart.
     #[serde(skip)]
     pub loss_curve: Vec<f64>,
+    /// The learned prior's shape when it was fitted: `depth_from_object` then places the prior's
+    /// normalised frame, and `shape` is the family fit it started from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub learned: Option<LearnedShape>,
+}
+
+/// A fitted shape of a learned prior.
+#[derive(Clone, Debug, Serialize)]
+pub struct LearnedShape {
+    /// The prior's latent code.
+    pub latent: Vec<f64>,
+    /// Lowest object-frame y of the surface.
+    pub base_y: f64,
+    /// The prior.
+    #[serde(skip)]
+    pub net: Arc<SdfNet>,
+    /// The field of `latent`.
+    #[serde(skip)]
+    pub sdf: Arc<LatentSdf>,
 }
 
 fn ser_sim<S: serde::Serializer>(s: &Similarity3<f64>, ser: S) -> Result<S::Ok, S::Error> {
@@ -211,7 +253,31 @@ fn ser_sim<S: serde::Serializer>(s: &Similarity3<f64>, ser: S) -> Result<S::Ok, 
 impl FittedObject {
     /// The object as a renderer SDF.
     pub fn placed(&self) -> PlacedSdf {
-        PlacedSdf { sdf: self.shape.sdf(), depth_from_object: self.depth_from_object }
+        match &self.learned {
+            Some(l) => PlacedSdf { sdf: l.sdf.clone(), depth_from_object: self.depth_from_object },
+            None => PlacedSdf { sdf: self.shape.sdf(), depth_from_object: self.depth_from_object },
+        }
+    }
+
+    /// Lowest object-frame y of the fitted surface.
+    pub fn base_y(&self) -> f64 {
+        self.learned.as_ref().map_or_else(|| self.shape.base_y(), |l| l.base_y)
+    }
+
+    /// The fitted surface as a mesh in the depth frame, `resolution` cells across the object
+    /// (a learned shape: batched network evaluation, its largest piece).
+    pub fn mesh(&self, resolution: usize) -> Result<TriMesh, ReconError> {
+        let s = &self.depth_from_object;
+        let mut m = match &self.learned {
+            Some(l) => irmirror_sdf::quality::extract_mesh(&l.net, &l.latent, resolution)?.largest_component(),
+            None => {
+                let sdf = self.shape.sdf();
+                let r = sdf.bounding_radius() * 1.05;
+                irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), resolution)
+            }
+        };
+        m.map_vertices(|v| s.transform_point(&Vector3::from(v.map(f64::from))).map(|x| x as f32).into());
+        Ok(m)
     }
 }
 
@@ -558,7 +624,52 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
         mean_surface_error_m: mean,
         points: obs.surface.len(),
         loss_curve: curve,
+        learned: None,
     }
+}
+
+/// Points just behind the observed surface along the camera rays (inside any wall): 1.5 % of
+/// the object's size, ≈ 1–1.5 mm on a mug or a bowl, thinner than their walls.
+const INSIDE_DEPTH: f64 = 0.015;
+
+/// The learned prior's fit from a family fit (`fit`): the family shape's bounding box gives
+/// the prior's normalised frame (centre, half-diagonal 0.9), the mean latent the shape; then
+/// latent and placement are fitted together. Spheres are returned unchanged.
+pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cfg: &ObjectConfig, seed: u64) -> Result<FittedObject, ReconError> {
+    let category = match fit.shape {
+        Shape::Sphere => return Ok(fit),
+        Shape::Bowl { .. } => Category::Bowl,
+        Shape::Mug { .. } => Category::Mug,
+        Shape::Car { .. } => Category::Car,
+    };
+    let net = SdfNet::builtin(category)?;
+    let sdf = fit.shape.sdf();
+    let r = sdf.bounding_radius() * 1.05;
+    let (lo, hi) = irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), 48).bounds().ok_or(ReconError::EmptyObject { pixels: 0 })?;
+    let (lo, hi) = (Vector3::from(lo.map(f64::from)), Vector3::from(hi.map(f64::from)));
+    let s = &fit.depth_from_object;
+    let k = (hi - lo).norm() / 2.0 / irmirror_sdf::families::NORMALISED_RADIUS;
+    let init = Similarity3 { rotation: s.rotation, translation: s.transform_point(&((lo + hi) / 2.0)), scale: s.scale * k };
+    let unit = s.scale;
+    let inside: Vec<Vector3<f64>> = obs.surface.iter().map(|p| p + p.normalize() * INSIDE_DEPTH * unit).collect();
+    let scale_prior = Family::of(category.name())?.size_prior().map(|_| (init.scale.ln(), 0.1));
+    let observation = PlacedObservation { surface: &obs.surface, free: &obs.free, inside: &inside, up: Some(plane.n()), unit_m: unit, scale_prior };
+    let placed = fit_placed(&net, &observation, &init, &net.mean_latent(), &PlacedFitConfig { seed, ..cfg.learned })?;
+    let field = Arc::new(net.shape(&placed.latent)?);
+    let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?.largest_component();
+    let base_y = mesh.vertices.iter().map(|v| f64::from(v[1])).fold(f64::INFINITY, f64::min);
+    let d = placed.depth_from_object;
+    let mean = obs.surface.iter().map(|p| (d.scale * field.value_grad(&d.inverse_transform_point(p)).0).abs()).sum::<f64>() / obs.surface.len() as f64;
+    let mut curve = fit.loss_curve;
+    curve.extend(&placed.curve);
+    Ok(FittedObject {
+        depth_from_object: d,
+        loss: placed.loss,
+        mean_surface_error_m: mean,
+        loss_curve: curve,
+        learned: Some(LearnedShape { latent: placed.latent, base_y, net, sdf: field }),
+        ..fit
+    })
 }
 
 /// Stage-1 settings (plane, segmentation, fit).
@@ -656,6 +767,7 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
         }
     }
     let mut objects = Vec::with_capacity(masks.len());
+    let mut observations = Vec::with_capacity(masks.len());
     for (k, mask) in masks.iter().enumerate() {
         let obs = observe(depth, cam, mask, &cfg.fit)?;
         let fit = if segmented[k] {
@@ -664,6 +776,7 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
             fit_family(families[k], &obs, &plane, &cfg.fit)
         };
         objects.push(fit);
+        observations.push(obs);
     }
     // Objects split from one cluster: the split's straight cut is only a first guess. Give every
     // point of the cluster to the fitted surface nearest to it, and refit on those masks.
@@ -688,8 +801,13 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
         for (&j, m) in members.iter().zip(new) {
             let Ok(obs) = observe(depth, cam, &m, &cfg.fit) else { continue };
             objects[j] = fit_family(Family::of(&objects[j].category)?, &obs, &plane, &cfg.fit);
+            observations[j] = obs;
             masks[j] = m;
         }
+    }
+    // The learned prior starts from the final family fits (after any split).
+    if cfg.fit.prior == ObjectPrior::Learned {
+        objects = objects.into_iter().zip(&observations).enumerate().map(|(k, (o, obs))| fit_learned(o, obs, &plane, &cfg.fit, seed.wrapping_add(k as u64))).collect::<Result<_, _>>()?;
     }
     Ok(Objects { plane, objects, masks, segmented })
 }

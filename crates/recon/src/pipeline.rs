@@ -130,7 +130,7 @@ pub fn floor(objects: &Objects, cfg: &HumanConfig) -> Option<Floor> {
     let car = objects.objects.iter().find(|o| matches!(o.shape, irmirror_render::shapes::Shape::Car { .. }));
     if let Some(car) = car {
         let s = &car.depth_from_object;
-        let base = s.translation + s.rotation * Vector3::new(0.0, car.shape.base_y(), 0.0) * s.scale;
+        let base = s.translation + s.rotation * Vector3::new(0.0, car.base_y(), 0.0) * s.scale;
         return Some(Floor { up, offset_m: up.dot(&base) });
     }
     objects.plane.found.then_some(Floor { up, offset_m: objects.plane.offset_m - cfg.table_height_m })

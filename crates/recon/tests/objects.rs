@@ -209,3 +209,41 @@ fn touching_objects_are_separated() {
         assert!(precision > 0.97 && recall > 0.97 && e.0 < 0.012 && e.2 < 5.0, "bowl {k}: precision {precision}, recall {recall}, errors {e:?}");
     }
 }
+
+/// On objects from the learned priors' own families (tapered mugs with varied handles, flared
+/// bowls), the learned prior's fit (latent and placement, from the family fit) describes the
+/// observed surface better than the two-parameter family. (The unseen underside is the prior's
+/// guess — on this bowl it reaches 1.5 cm below the table, the learned fit has no support-plane
+/// term yet — so Chamfer to the whole true mesh is not always better: `irmirror bench objects
+/// --shapes family`.)
+#[test]
+fn learned_prior_fits_family_shapes() {
+    use irmirror_recon::objects::ObjectPrior;
+    let seed = 1;
+    let mut sc = scene(seed);
+    let mut rng = irmirror_geom::rng::seeded(seed, 2000);
+    for o in &mut sc.objects {
+        (o.shape, o.scale_m) = o.shape.family_like(o.scale_m, &mut rng).unwrap();
+    }
+    let dir = std::env::temp_dir().join(format!("irmirror-objects-{}-learned", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let sim = simulate(model(), &sc, seed).unwrap();
+    sim.write(model(), &dir, seed).unwrap();
+    let cap = Capture::load(&dir).unwrap();
+    let simple = reconstruct_objects(&cap, &Stage1Config::default(), seed).unwrap();
+    let mut cfg = Stage1Config::default();
+    cfg.fit.prior = ObjectPrior::Learned;
+    let learned = reconstruct_objects(&cap, &cfg, seed).unwrap();
+    for (k, truth) in sim.object_meshes.iter().enumerate() {
+        let (a, b) = (&simple.objects[k], &learned.objects[k]);
+        assert!(a.learned.is_none() && b.learned.as_ref().is_some_and(|l| l.latent.len() == 32));
+        let chamfer = |o: &irmirror_recon::objects::FittedObject| irmirror_sdf::quality::chamfer(&o.mesh(64).unwrap(), truth, 4000, 0) * 1e6;
+        let (ca, cb) = (chamfer(a), chamfer(b));
+        eprintln!("object {k} ({}): Chamfer simple {ca:.2} mm², learned {cb:.2} mm²; mean surface error {:.2} → {:.2} mm", a.category, a.mean_surface_error_m * 1e3, b.mean_surface_error_m * 1e3);
+        assert!(b.mean_surface_error_m < 0.8 * a.mean_surface_error_m, "object {k}: the learned prior fits the observed points no better");
+        // Measured: 23.6 mm² (the bowl; the family fit 9.9 mm²).
+        assert!(cb < 50.0, "object {k}: Chamfer {cb} mm²");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -89,6 +89,22 @@ impl SdfNet {
         })
     }
 
+    /// The shipped prior of `category` (`assets/object_priors`, built into the binary), parsed
+    /// once per process.
+    pub fn builtin(category: Category) -> Result<Arc<SdfNet>, SdfError> {
+        static CACHE: std::sync::OnceLock<[Result<Arc<SdfNet>, String>; 3]> = std::sync::OnceLock::new();
+        let cache = CACHE.get_or_init(|| {
+            let parse = |b: &[u8]| SdfNet::from_bytes(b).map(Arc::new).map_err(|e| e.to_string());
+            [
+                parse(include_bytes!("../../../assets/object_priors/bowl.safetensors")),
+                parse(include_bytes!("../../../assets/object_priors/mug.safetensors")),
+                parse(include_bytes!("../../../assets/object_priors/car.safetensors")),
+            ]
+        });
+        let k = Category::ALL.iter().position(|c| *c == category).expect("every category has a prior");
+        cache[k].clone().map_err(|reason| SdfError::Weights { path: format!("built-in {} prior", category.name()), reason })
+    }
+
     /// Loads a prior, checking every tensor's shape.
     pub fn load(path: &Path) -> Result<Self, SdfError> {
         let bytes = std::fs::read(path).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: format!("cannot read: {e}") })?;

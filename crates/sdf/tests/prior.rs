@@ -230,3 +230,15 @@ fn shipped_priors_load_and_describe_a_closed_surface() {
         assert!(m.signed_volume() > 0.0);
     }
 }
+
+#[test]
+fn builtin_priors_are_the_shipped_files() {
+    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/object_priors"));
+    for cat in Category::ALL {
+        let built_in = SdfNet::builtin(cat).unwrap();
+        let file = SdfNet::load(&dir.join(format!("{}.safetensors", cat.name()))).unwrap();
+        assert_eq!(built_in.category, cat);
+        assert_eq!(built_in.train_latents, file.train_latents);
+        assert_eq!(built_in.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3)).0, file.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3)).0);
+    }
+}
