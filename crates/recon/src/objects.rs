@@ -2,8 +2,9 @@
 //! `depth_from_object` (R, t, s) and the shape parameters of its category's prior, fitted to the
 //! depth points inside its mask.
 //!
-//! The prior today is the procedural family of [`irmirror_render::shapes`] (2 parameters per
-//! category); the learned DeepSDF priors of issue 4 will slot in behind the same [`Family`].
+//! The prior is the procedural family of [`irmirror_render::shapes`] (2 parameters per
+//! category); with [`ObjectPrior::Learned`] the category's learned DeepSDF prior then takes over
+//! from that fit ([`fit_learned`]: latent and placement together).
 //!
 //! Loss (all distances in units of the initial object size `s₀`, so one schedule fits a mug and
 //! a car):
