@@ -68,9 +68,7 @@ impl TriMesh {
         }
         let mut volume = std::collections::HashMap::new();
         for t in &self.triangles {
-            let [a, b, c] = t.map(|i| self.vertices[i as usize].map(f64::from));
-            let v = (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
-            *volume.entry(find(&mut parent, t[0] as usize)).or_insert(0.0) += v;
+            *volume.entry(find(&mut parent, t[0] as usize)).or_insert(0.0) += self.tetra_volume(t);
         }
         let Some(keep) = volume.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map(|(k, _)| *k) else { return TriMesh::default() };
         let mut index = vec![u32::MAX; n];
@@ -90,20 +88,16 @@ impl TriMesh {
         out
     }
 
+    /// Signed volume of the tetrahedron (origin, triangle `t`).
+    fn tetra_volume(&self, t: &[u32; 3]) -> f64 {
+        let [a, b, c] = t.map(|i| self.vertices[i as usize].map(f64::from));
+        let cross = [b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0]];
+        (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0
+    }
+
     /// Signed volume (m³): positive for a closed mesh with outward CCW triangles.
     pub fn signed_volume(&self) -> f64 {
-        self.triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| self.vertices[i as usize].map(f64::from));
-                let cross = [
-                    b[1] * c[2] - b[2] * c[1],
-                    b[2] * c[0] - b[0] * c[2],
-                    b[0] * c[1] - b[1] * c[0],
-                ];
-                (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0
-            })
-            .sum()
+        self.triangles.iter().map(|t| self.tetra_volume(t)).sum()
     }
 
     /// Area-weighted vertex normals (unit; zero for isolated vertices).

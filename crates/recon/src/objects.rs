@@ -646,7 +646,7 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
     let net = SdfNet::builtin(category)?;
     let sdf = fit.shape.sdf();
     let r = sdf.bounding_radius() * 1.05;
-    let (lo, hi) = irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), 48).bounds().ok_or(ReconError::EmptyObject { pixels: 0 })?;
+    let (lo, hi) = irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), 48).bounds().ok_or_else(|| irmirror_sdf::SdfError::Invalid(format!("the fitted {} has no surface to place the learned prior on", category.name())))?;
     let (lo, hi) = (Vector3::from(lo.map(f64::from)), Vector3::from(hi.map(f64::from)));
     let s = &fit.depth_from_object;
     let k = (hi - lo).norm() / 2.0 / irmirror_sdf::families::NORMALISED_RADIUS;

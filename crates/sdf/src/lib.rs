@@ -9,6 +9,7 @@
 //!    └─► train: auto-decoder (latent ⊕ point → SDF), clamped L1 + latent prior, Adam
 //!    └─► SdfNet (frozen weights): SDF value + gradient per point (the renderer's `Sdf`), batched;
 //!        infer: latent from SDF samples or from surface + free-space points; mesh extraction
+//!    └─► placed: latent and similarity fitted together to depth points (stage 1, learned prior)
 //! ```
 //!
 //! Object frame (shared with `irmirror_render::shapes`): **+Y up**, **+X front** (car nose, mug

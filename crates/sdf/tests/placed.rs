@@ -106,3 +106,21 @@ fn placed_fit_recovers_shape_and_placement_from_a_perturbed_start() {
     assert!(chamfer_mm2 < 1.0, "Chamfer {chamfer_mm2} mm² to the true surface");
     assert!(mean_err < 0.0005, "surface fitted to {mean_err} m on a 0.1 m-unit mug");
 }
+
+#[test]
+fn placed_fit_refuses_bad_input_clearly() {
+    let net = prior(Category::Bowl);
+    let init = Similarity3 { rotation: nalgebra::Matrix3::identity(), translation: Vector3::new(0.0, 0.0, 0.6), scale: 0.1 };
+    fn obs(surface: &[Vector3<f64>], unit_m: f64) -> PlacedObservation<'_> {
+        PlacedObservation { surface, free: &[], inside: &[], up: None, unit_m, scale_prior: None }
+    }
+    let cfg = PlacedFitConfig { latent_steps: 1, steps: 1, ..Default::default() };
+    let z = net.mean_latent();
+    let msg = |o: PlacedObservation, z: &[f64]| fit_placed(&net, &o, &init, z, &cfg).unwrap_err().to_string();
+    let (good, nan) = ([Vector3::new(0.0, 0.0, 0.55)], [Vector3::new(f64::NAN, 0.0, 0.5)]);
+    assert!(msg(obs(&[], 0.1), &z).contains("needs surface points"));
+    assert!(msg(obs(&nan, 0.1), &z).contains("not finite"));
+    assert!(msg(obs(&good, 0.0), &z).contains("must be positive"));
+    assert!(msg(obs(&good, 0.1), &z[..3]).contains("latent of length 3"));
+    assert!(fit_placed(&net, &obs(&good, 0.1), &init, &z, &cfg).is_ok());
+}

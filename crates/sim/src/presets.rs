@@ -43,37 +43,34 @@ pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: ThermalPreset, s
 
 /// [`preset_scene`] with the objects' shapes drawn from `shapes`.
 pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: ThermalPreset, shapes: Shapes, seed: u64) -> Result<SceneFile, SimError> {
-    let draw_scene = |model: &BodyModel, preset: Preset, thermal: ThermalPreset, seed: u64, attempt: u64| {
-        let mut scene = draw_scene(model, preset, thermal, seed, attempt);
-        if shapes == Shapes::Family {
-            // Its own stream: the rest of the scene is the simple preset's, draw for draw.
-            let mut rng = irmirror_geom::rng::seeded(seed, 2000 + attempt);
-            for o in &mut scene.objects {
-                if let Some((shape, scale_m)) = o.shape.family_like(o.scale_m, &mut rng) {
-                    (o.shape, o.scale_m) = (shape, scale_m);
-                }
-            }
-        }
-        scene
-    };
-    let mut scene = draw_scene(model, preset, thermal, seed, 0);
+    let mut scene = draw_scene(model, preset, thermal, shapes, seed, 0);
     for attempt in 1..ATTEMPTS {
         let mut probe = scene.clone();
         probe.sensor = Sensor::ideal();
         if crate::simulate::reflection_pixels(model, &probe)? >= MIN_REFLECTION_PIXELS {
             break;
         }
-        scene = draw_scene(model, preset, thermal, seed, attempt);
+        scene = draw_scene(model, preset, thermal, shapes, seed, attempt);
     }
     Ok(scene)
 }
 
-fn draw_scene(model: &BodyModel, preset: Preset, thermal: ThermalPreset, seed: u64, attempt: u64) -> SceneFile {
+fn draw_scene(model: &BodyModel, preset: Preset, thermal: ThermalPreset, shapes: Shapes, seed: u64, attempt: u64) -> SceneFile {
     let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
     let phenotype = random_phenotype(&mut rng);
     let (name, rotvecs) = random_pose(model, &mut rng);
-    match preset {
+    let mut scene = match preset {
         Preset::Tabletop => tabletop(&mut rng, (name, rotvecs), phenotype, thermal),
         Preset::Car => car(&mut rng, (name, rotvecs), phenotype, thermal),
+    };
+    if shapes == Shapes::Family {
+        // Its own stream: the rest of the scene is the simple preset's, draw for draw.
+        let mut rng = irmirror_geom::rng::seeded(seed, 2000 + attempt);
+        for o in &mut scene.objects {
+            if let Some((shape, scale_m)) = o.shape.family_like(o.scale_m, &mut rng) {
+                (o.shape, o.scale_m) = (shape, scale_m);
+            }
+        }
     }
+    scene
 }
