@@ -632,10 +632,15 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
 /// Points just behind the observed surface along the camera rays (inside any wall): 1.5 % of
 /// the object's size, ≈ 1–1.5 mm on a mug or a bowl, thinner than their walls.
 const INSIDE_DEPTH: f64 = 0.015;
+/// Support-plane free-space points: a grid this many per side under the footprint…
+const SUPPORT_GRID: usize = 16;
+/// …this far below the plane, in units of the object's size (`unit_m`).
+const SUPPORT_DEPTH: f64 = 0.02;
 
 /// The learned prior's fit from a family fit (`fit`): the family shape's bounding box gives
 /// the prior's normalised frame (centre, half-diagonal 0.9), the mean latent the shape; then
-/// latent and placement are fitted together. Spheres are returned unchanged.
+/// latent and placement are fitted together, with a grid just below the support plane under the
+/// footprint kept outside (when a plane was found). Spheres are returned unchanged.
 pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cfg: &ObjectConfig, seed: u64) -> Result<FittedObject, ReconError> {
     let category = match fit.shape {
         Shape::Sphere => return Ok(fit),
@@ -654,7 +659,20 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
     let unit = s.scale;
     let inside: Vec<Vector3<f64>> = obs.surface.iter().map(|p| p + p.normalize() * INSIDE_DEPTH * unit).collect();
     let scale_prior = Family::of(category.name())?.size_prior().map(|_| (init.scale.ln(), 0.1));
-    let observation = PlacedObservation { surface: &obs.surface, free: &obs.free, inside: &inside, up: Some(plane.n()), unit_m: unit, scale_prior };
+    // The underside is never seen: without the table the latent may push it through the plane.
+    // A grid just below the plane under the (slightly widened) footprint is free space.
+    let mut support = Vec::new();
+    if plane.found {
+        let (n, g) = (plane.n(), SUPPORT_GRID);
+        for i in 0..g {
+            for j in 0..g {
+                let f = |k: usize, a: f64, b: f64| a + (b - a) * (-0.1 + 1.2 * (k as f64 + 0.5) / g as f64);
+                let p = s.transform_point(&Vector3::new(f(i, lo.x, hi.x), lo.y, f(j, lo.z, hi.z)));
+                support.push(p - n * (plane.height(&p) + SUPPORT_DEPTH * unit));
+            }
+        }
+    }
+    let observation = PlacedObservation { surface: &obs.surface, free: &obs.free, inside: &inside, support: &support, up: Some(plane.n()), unit_m: unit, scale_prior };
     let placed = fit_placed(&net, &observation, &init, &net.mean_latent(), &PlacedFitConfig { seed, ..cfg.learned })?;
     let field = Arc::new(net.shape(&placed.latent)?);
     let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?.largest_component();

@@ -5,7 +5,7 @@
 //! Loss, lengths in units of `unit_m` (the object's size, so one schedule fits a mug and a car):
 //! * surface points: Huber of the metric signed distance `s · f(z, Rᵀ(p − t)/s)`;
 //! * free-space points (in front of the surface, or on rays that saw past the object): hinge
-//!   `max(0, −d)`;
+//!   `max(0, −d)`; the same, weighted `w_support`, on points just below the support plane;
 //! * the object stands upright: `w_up ‖R ŷ − n‖²` when the support-plane normal `n` is known;
 //! * DeepSDF's latent prior `λ ‖z‖²`, and an optional log-normal prior on the scale.
 //!
@@ -46,6 +46,8 @@ pub struct PlacedFitConfig {
     pub huber: f64,
     /// Weight of the free-space hinge.
     pub w_free: f64,
+    /// Weight of the support-plane hinge (its points are few and the underside's only evidence).
+    pub w_support: f64,
     /// Weight of the upright prior.
     pub w_up: f64,
     /// Surface and free-space points drawn per step (each; all when fewer).
@@ -66,6 +68,7 @@ impl Default for PlacedFitConfig {
             latent_reg: 1e-4,
             huber: 0.03,
             w_free: 1.0,
+            w_support: 10.0,
             w_up: 0.3,
             batch: 512,
             seed: 0,
@@ -82,6 +85,9 @@ pub struct PlacedObservation<'a> {
     pub free: &'a [Vector3<f64>],
     /// Points known to be inside the object.
     pub inside: &'a [Vector3<f64>],
+    /// Points outside the object used in every step (not drawn): a grid just below the support
+    /// plane under the footprint, so the unseen underside does not go through the table.
+    pub support: &'a [Vector3<f64>],
     /// Unit normal of the support plane (the object's +Y), when known.
     pub up: Option<Vector3<f64>>,
     /// Length unit of the loss, metres (the object's size).
@@ -128,7 +134,7 @@ fn tensor(v: Vec<f64>, shape: &[usize], dtype: DType) -> candle_core::Result<Ten
 
 impl Frame<'_> {
     /// The loss (a scalar tensor) on the given surface and free points.
-    fn loss(&self, v: &Vars, surface: &[Vector3<f64>], free: &[Vector3<f64>], inside: &[Vector3<f64>]) -> candle_core::Result<Tensor> {
+    fn loss(&self, v: &Vars, surface: &[Vector3<f64>], free: &[Vector3<f64>], inside: &[Vector3<f64>], support: &[Vector3<f64>]) -> candle_core::Result<Tensor> {
         let dt = self.dtype;
         let u = self.obs.unit_m;
         let l = v.z.as_tensor().dim(1)?;
@@ -146,8 +152,8 @@ impl Frame<'_> {
         let m = (&r0 + r0.matmul(&skew)?)?;
         let t = (tensor(self.t0.as_slice().to_vec(), &[1, 3], dt)? + v.tau.as_tensor().affine(u, 0.0)?)?;
         let s = v.log_s.as_tensor().exp()?.affine(self.s0, 0.0)?; // [1, 1]
-        let (n_s, n_f) = (surface.len(), free.len());
-        let pts: Vec<f64> = surface.iter().chain(free).chain(inside).flat_map(|p| [p.x, p.y, p.z]).collect();
+        let (n_s, n_f, n_i, n_u) = (surface.len(), free.len(), inside.len(), support.len());
+        let pts: Vec<f64> = surface.iter().chain(free).chain(inside).chain(support).flat_map(|p| [p.x, p.y, p.z]).collect();
         let n = pts.len() / 3;
         let p = tensor(pts, &[n, 3], dt)?;
         let q = p.broadcast_sub(&t)?.matmul(&m)?.broadcast_div(&s)?;
@@ -163,9 +169,13 @@ impl Frame<'_> {
             let hinge = d.narrow(0, n_s, n_f)?.neg()?.relu()?.mean_all()?;
             total = (total + hinge.affine(self.cfg.w_free, 0.0)?)?;
         }
-        if n > n_s + n_f {
-            let hinge = d.narrow(0, n_s + n_f, n - n_s - n_f)?.relu()?.mean_all()?;
+        if n_i > 0 {
+            let hinge = d.narrow(0, n_s + n_f, n_i)?.relu()?.mean_all()?;
             total = (total + hinge.affine(self.cfg.w_free, 0.0)?)?;
+        }
+        if n_u > 0 {
+            let hinge = d.narrow(0, n_s + n_f + n_i, n_u)?.neg()?.relu()?.mean_all()?;
+            total = (total + hinge.affine(self.cfg.w_support, 0.0)?)?;
         }
         if let Some(up) = self.obs.up {
             let ey = tensor(vec![0.0, 1.0, 0.0], &[3, 1], dt)?;
@@ -198,7 +208,7 @@ fn check(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>, latent:
     if obs.surface.is_empty() {
         return Err(SdfError::Invalid("fitting a placed shape needs surface points".into()));
     }
-    if obs.surface.iter().chain(obs.free).chain(obs.inside).any(|p| !p.iter().all(|v| v.is_finite())) {
+    if obs.surface.iter().chain(obs.free).chain(obs.inside).chain(obs.support).any(|p| !p.iter().all(|v| v.is_finite())) {
         return Err(SdfError::Invalid("fitting a placed shape: a point is not finite".into()));
     }
     if !(obs.unit_m > 0.0 && init.scale > 0.0 && init.translation.iter().all(|v| v.is_finite())) {
@@ -231,7 +241,7 @@ pub fn fit_placed(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>
         let (k, n) = if joint { (step - cfg.latent_steps, cfg.steps) } else { (step, cfg.latent_steps) };
         let decay = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * k as f64 / n.max(1) as f64).cos());
         let (surface, free, inside) = (draw(obs.surface, &mut rng), draw(obs.free, &mut rng), draw(obs.inside, &mut rng));
-        let loss = frame.loss(&v, &surface, &free, &inside)?;
+        let loss = frame.loss(&v, &surface, &free, &inside, obs.support)?;
         let value = scalar(&loss)?;
         if !value.is_finite() {
             return Err(SdfError::Invalid(format!("placed-shape fit diverged at step {step}")));
@@ -250,7 +260,7 @@ pub fn fit_placed(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>
         frame.r0 *= axis_angle_to_matrix(&Vector3::new(d[0], d[1], d[2]));
         v.delta.set(&tensor(vec![0.0; 3], &[1, 3], dt)?)?;
     }
-    let loss = scalar(&frame.loss(&v, obs.surface, obs.free, obs.inside)?)?;
+    let loss = scalar(&frame.loss(&v, obs.surface, obs.free, obs.inside, obs.support)?)?;
     let z = v.z.as_tensor().to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
     let tau = v.tau.as_tensor().to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
     let log_s = scalar(&v.log_s.as_tensor().flatten_all()?.get(0)?)?;
@@ -269,7 +279,7 @@ pub fn loss_and_gradient(net: &SdfNet, obs: &PlacedObservation, init: &Similarit
     v.tau.set(&tensor(tau.as_slice().to_vec(), &[1, 3], dt)?)?;
     v.log_s.set(&tensor(vec![log_s], &[1, 1], dt)?)?;
     let frame = Frame { net: &layers, r0: init.rotation, t0: init.translation, s0: init.scale, obs, cfg, dtype: dt };
-    let loss = frame.loss(&v, obs.surface, obs.free, obs.inside)?;
+    let loss = frame.loss(&v, obs.surface, obs.free, obs.inside, obs.support)?;
     let grads = loss.backward()?;
     let mut g = Vec::new();
     for var in [&v.z, &v.delta, &v.tau, &v.log_s] {

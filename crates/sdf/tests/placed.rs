@@ -35,7 +35,9 @@ fn placed_fit_gradients_match_finite_differences() {
     let (surface, free) = (&surface[..60], &free[..60]);
     let up = truth.rotation * Vector3::y();
     let inside: Vec<Vector3<f64>> = surface.iter().map(|p| p + (p - truth.translation).normalize() * -0.001).collect();
-    let obs = PlacedObservation { surface, free, inside: &inside, up: Some((up + Vector3::new(0.05, 0.0, 0.0)).normalize()), unit_m: 0.1, scale_prior: Some((0.1f64.ln(), 0.1)) };
+    // Support points 2 mm inside, so their hinge is active.
+    let support: Vec<Vector3<f64>> = surface[..10].iter().map(|p| p + (p - truth.translation).normalize() * -0.002).collect();
+    let obs = PlacedObservation { surface, free, inside: &inside, support: &support, up: Some((up + Vector3::new(0.05, 0.0, 0.0)).normalize()), unit_m: 0.1, scale_prior: Some((0.1f64.ln(), 0.1)) };
     // Off the truth so that every term is active (Huber in both branches, hinges on).
     let init = Similarity3 { rotation: truth.rotation * axis_angle_to_matrix(&Vector3::new(0.1, -0.05, 0.08)), translation: truth.translation + Vector3::new(0.004, -0.003, 0.002), scale: 0.11 };
     let cfg = PlacedFitConfig::default();
@@ -82,7 +84,7 @@ fn placed_fit_recovers_shape_and_placement_from_a_perturbed_start() {
         inside.push(truth.transform_point(&(q - n * 0.005)));
     }
     let up = truth.rotation * Vector3::y();
-    let obs = PlacedObservation { surface: &surface, free: &free, inside: &inside, up: Some(up), unit_m: truth.scale, scale_prior: None };
+    let obs = PlacedObservation { surface: &surface, free: &free, inside: &inside, support: &[], up: Some(up), unit_m: truth.scale, scale_prior: None };
     // 5 % of the size off, 5° about the up axis, 5 % scale, the mean latent.
     let init = Similarity3 { rotation: axis_angle_to_matrix(&(up * 5f64.to_radians())) * truth.rotation, translation: truth.translation + Vector3::new(0.004, -0.003, 0.002), scale: truth.scale * 1.05 };
     let fit = fit_placed(&net, &obs, &init, &net.mean_latent(), &PlacedFitConfig::default()).unwrap();
@@ -112,7 +114,7 @@ fn placed_fit_refuses_bad_input_clearly() {
     let net = prior(Category::Bowl);
     let init = Similarity3 { rotation: nalgebra::Matrix3::identity(), translation: Vector3::new(0.0, 0.0, 0.6), scale: 0.1 };
     fn obs(surface: &[Vector3<f64>], unit_m: f64) -> PlacedObservation<'_> {
-        PlacedObservation { surface, free: &[], inside: &[], up: None, unit_m, scale_prior: None }
+        PlacedObservation { surface, free: &[], inside: &[], support: &[], up: None, unit_m, scale_prior: None }
     }
     let cfg = PlacedFitConfig { latent_steps: 1, steps: 1, ..Default::default() };
     let z = net.mean_latent();
