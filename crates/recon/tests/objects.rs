@@ -213,7 +213,7 @@ fn touching_objects_are_separated() {
 /// On objects from the learned priors' own families (tapered mugs with varied handles, flared
 /// bowls), the learned prior's fit (latent and placement, from the family fit) describes the
 /// observed surface better than the two-parameter family, and the unseen underside stays on the
-/// table (before the support-plane term it reached 1.5 cm below it on this bowl). The underside
+/// table. The underside
 /// is still the prior's guess, so Chamfer to the whole true mesh is not always better:
 /// `irmirror bench objects --shapes family`.
 #[test]
@@ -242,9 +242,11 @@ fn learned_prior_fits_family_shapes() {
         let (ca, cb) = (chamfer(a), chamfer(b));
         let below = b.mesh(64).unwrap().vertices.iter().map(|v| -learned.plane.height(&Vector3::new(v[0], v[1], v[2]).map(f64::from))).fold(f64::NEG_INFINITY, f64::max);
         eprintln!("object {k} ({}): Chamfer simple {ca:.2} mm², learned {cb:.2} mm²; mean surface error {:.2} → {:.2} mm; lowest point {:.1} mm below the plane", a.category, a.mean_surface_error_m * 1e3, b.mean_surface_error_m * 1e3, below * 1e3);
-        assert!(below < 0.004, "object {k}: the learned surface reaches {below} m below the table");
+        // Measured 3.1 mm on the bowl (support points 2.3 mm below the plane; a 64³ cell of it is
+        // 3.6 mm); 14.6 mm without the support-plane term.
+        assert!(below < 0.005, "object {k}: the learned surface reaches {below} m below the table");
         assert!(b.mean_surface_error_m < 0.8 * a.mean_surface_error_m, "object {k}: the learned prior fits the observed points no better");
-        // Measured: 23.6 mm² (the bowl; the family fit 9.9 mm²).
+        // Measured: 13.4 mm² (the bowl; the family fit 9.9 mm²).
         assert!(cb < 50.0, "object {k}: Chamfer {cb} mm²");
     }
     std::fs::remove_dir_all(&dir).ok();
