@@ -213,9 +213,8 @@ fn touching_objects_are_separated() {
 /// On objects from the learned priors' own families (tapered mugs with varied handles, flared
 /// bowls), the learned prior's fit (latent and placement, from the family fit) describes the
 /// observed surface better than the two-parameter family, and the unseen underside stays on the
-/// table. The underside
-/// is still the prior's guess, so Chamfer to the whole true mesh is not always better:
-/// `irmirror bench objects --shapes family`.
+/// table. The underside is still the prior's guess, so Chamfer to the whole true mesh is not
+/// always better: `irmirror bench objects --shapes family`.
 #[test]
 fn learned_prior_fits_family_shapes() {
     use irmirror_recon::objects::ObjectPrior;

@@ -35,16 +35,25 @@ fn placed_fit_gradients_match_finite_differences() {
     let (surface, free) = (&surface[..60], &free[..60]);
     let up = truth.rotation * Vector3::y();
     let inside: Vec<Vector3<f64>> = surface.iter().map(|p| p + (p - truth.translation).normalize() * -0.001).collect();
-    // Support points 2 mm inside, so their hinge is active.
-    let support: Vec<Vector3<f64>> = surface[..10].iter().map(|p| p + (p - truth.translation).normalize() * -0.002).collect();
-    let obs = PlacedObservation { surface, free, inside: &inside, support: &support, up: Some((up + Vector3::new(0.05, 0.0, 0.0)).normalize()), unit_m: 0.1, scale_prior: Some((0.1f64.ln(), 0.1)) };
     // Off the truth so that every term is active (Huber in both branches, hinges on).
     let init = Similarity3 { rotation: truth.rotation * axis_angle_to_matrix(&Vector3::new(0.1, -0.05, 0.08)), translation: truth.translation + Vector3::new(0.004, -0.003, 0.002), scale: 0.11 };
-    let cfg = PlacedFitConfig::default();
     let z: Vec<f64> = net.mean_latent().iter().enumerate().map(|(i, v)| v + 0.01 * ((i as f64) * 0.7).sin()).collect();
-    let (delta, tau, log_s) = (Vector3::new(0.01, -0.02, 0.015), Vector3::new(0.02, 0.01, -0.03), 0.05);
+    let (delta, tau, log_s) = (Vector3::new(0.01, -0.02, 0.015), Vector3::new(0.02, 0.01, -0.03), 0.05f64);
+    // Support points: a grid in the normalised frame, half inside the shape at this state (the
+    // hinge is active there), half outside, placed by the state's own M = R₀ (I + [δ]×).
+    let field = std::sync::Arc::new(net.clone()).shape(&z).unwrap();
+    let m = init.rotation * (nalgebra::Matrix3::identity() + delta.cross_matrix());
+    let (t, s) = (init.translation + tau * 0.1, init.scale * log_s.exp());
+    let grid = (0..729).map(|i| Vector3::new((i % 9) as f64, (i / 9 % 9) as f64, (i / 81) as f64) * 0.2 - Vector3::repeat(0.8));
+    let (inner, outer): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = grid.partition(|q| field.value_grad(q).0 < 0.0);
+    let support: Vec<Vector3<f64>> = inner.iter().take(10).chain(outer.iter().take(10)).map(|q| t + m.transpose().try_inverse().unwrap() * q * s).collect();
+    assert!(inner.len() >= 10, "the grid should reach inside the mug");
+    let obs = PlacedObservation { surface, free, inside: &inside, support: &support, up: Some((up + Vector3::new(0.05, 0.0, 0.0)).normalize()), unit_m: 0.1, scale_prior: Some((0.1f64.ln(), 0.1)) };
+    let cfg = PlacedFitConfig::default();
     let (loss, grad) = loss_and_gradient(&net, &obs, &init, &z, delta, tau, log_s, &cfg).unwrap();
     assert!(loss > 0.0);
+    let no_support = loss_and_gradient(&net, &PlacedObservation { support: &[], ..obs }, &init, &z, delta, tau, log_s, &cfg).unwrap().0;
+    assert!(loss > no_support + 1e-4, "the support hinge is not active: {loss} vs {no_support}");
     let l = z.len();
     let h = 1e-6;
     for k in (0..l).step_by(5).chain(l..l + 7) {
