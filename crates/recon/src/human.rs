@@ -17,7 +17,8 @@
 //! * **Initialisations.** `inits` hypotheses, run in parallel: root on the mean reflected ray of
 //!   the mask at distances log-spaced over `init_distance_m` (then standing on the floor, when
 //!   it is known), upright on the support plane, facing the objects give or take 60°, pose
-//!   latent 0 for the first and prior samples (×0.5) for the rest. The best by final full-ray loss is kept; the `top_k` distinct ones are reported.
+//!   latent 0 for the first and prior samples (×0.5) for the rest. The best by final full-ray
+//!   loss is kept; the `top_k` distinct ones are reported.
 
 use crate::ReconError;
 use irmirror_body::prior::PosePrior;

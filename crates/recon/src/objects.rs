@@ -271,15 +271,18 @@ impl FittedObject {
         let s = &self.depth_from_object;
         let mut m = match &self.learned {
             Some(l) => irmirror_sdf::quality::extract_mesh(&l.net, &l.latent, resolution)?.largest_component(),
-            None => {
-                let sdf = self.shape.sdf();
-                let r = sdf.bounding_radius() * 1.05;
-                irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), resolution)
-            }
+            None => family_mesh(&self.shape, resolution),
         };
         m.map_vertices(|v| s.transform_point(&Vector3::from(v.map(f64::from))).map(|x| x as f32).into());
         Ok(m)
     }
+}
+
+/// A family shape's surface in its object frame, `resolution` cells across.
+fn family_mesh(shape: &Shape, resolution: usize) -> TriMesh {
+    let sdf = shape.sdf();
+    let r = sdf.bounding_radius() * 1.05;
+    irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), resolution)
 }
 
 /// What one object's fit sees (depth frame, metres).
@@ -649,9 +652,7 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
         Shape::Car { .. } => Category::Car,
     };
     let net = SdfNet::builtin(category)?;
-    let sdf = fit.shape.sdf();
-    let r = sdf.bounding_radius() * 1.05;
-    let (lo, hi) = irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), 48).bounds().ok_or_else(|| irmirror_sdf::SdfError::Invalid(format!("the fitted {} has no surface to place the learned prior on", category.name())))?;
+    let (lo, hi) = family_mesh(&fit.shape, 48).bounds().ok_or_else(|| irmirror_sdf::SdfError::Invalid(format!("the fitted {} has no surface to place the learned prior on", category.name())))?;
     let (lo, hi) = (Vector3::from(lo.map(f64::from)), Vector3::from(hi.map(f64::from)));
     let s = &fit.depth_from_object;
     let k = (hi - lo).norm() / 2.0 / irmirror_sdf::families::NORMALISED_RADIUS;

@@ -134,7 +134,7 @@ fn tensor(v: Vec<f64>, shape: &[usize], dtype: DType) -> candle_core::Result<Ten
 }
 
 impl Frame<'_> {
-    /// The loss (a scalar tensor) on the given surface and free points.
+    /// The loss (a scalar tensor) on the given surface, free, inside and support points.
     fn loss(&self, v: &Vars, surface: &[Vector3<f64>], free: &[Vector3<f64>], inside: &[Vector3<f64>], support: &[Vector3<f64>]) -> candle_core::Result<Tensor> {
         let dt = self.dtype;
         let u = self.obs.unit_m;
