@@ -26,7 +26,7 @@ use irmirror_body::{BodyModel, Pose};
 use irmirror_body::model::{BodyGrad, OutputGrads};
 use irmirror_capture::Image;
 use irmirror_geom::rotation::{axis_angle_to_matrix, axis_angle_to_matrix_vjp, matrix_to_axis_angle};
-use irmirror_render::occupancy::{Culling, OccupancyGrad, OccupancyParams, SoftRenderer};
+use irmirror_render::occupancy::{Aggregation, Culling, OccupancyGrad, OccupancyParams, SoftRenderer};
 use irmirror_render::reflect::ReflectedRays;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
@@ -75,18 +75,20 @@ pub struct HumanConfig {
     pub init_distance_m: [f64; 2],
     /// Distinct hypotheses reported.
     pub top_k: usize,
+    /// How the body's triangles form a ray's occupancy (`irmirror_render::occupancy` docs).
+    pub aggregation: Aggregation,
 }
 
 impl Default for HumanConfig {
     fn default() -> Self {
         Self {
             inits: 8,
-            iterations: 120,
-            rays_per_iteration: 768,
+            iterations: 200,
+            rays_per_iteration: 3000,
             edge_sampling: true,
             edge_mix: 0.9,
             edge_tau_px: [6.0, 1.5],
-            sigma_m2: [1e-3, 1e-4],
+            sigma_m2: [1e-3, 1e-5],
             lr_translation: 0.04,
             lr_rotation: 0.06,
             lr_latent: 0.08,
@@ -97,6 +99,7 @@ impl Default for HumanConfig {
             table_height_m: 0.75,
             init_distance_m: [0.7, 8.0],
             top_k: 3,
+            aggregation: Aggregation::Silhouette,
         }
     }
 }
@@ -325,7 +328,7 @@ impl HumanProblem<'_> {
         self.model.pose_into(&ws.shaped, &pose, &mut ws.posed).map_err(|e| err(e.to_string()))?;
         let r = ws.renderer.get_or_insert_with(|| SoftRenderer::new(&ws.posed.vertices, &self.model.asset.faces));
         r.set_vertices(&ws.posed.vertices);
-        let params = OccupancyParams { sigma_m2, ..OccupancyParams::default() };
+        let params = OccupancyParams { sigma_m2, aggregation: cfg.aggregation, ..OccupancyParams::default() };
         let occ = r.forward(rays, &params, Culling::Bvh);
         let (l_iou, iou) = soft_iou(&occ.value, target, &mut ws.d_value);
         let prior: f64 = latent.iter().map(|x| x * x).sum();

@@ -20,8 +20,12 @@ fn prior() -> &'static PosePrior {
 }
 
 fn scene(seed: u64, is_car: bool) -> SceneFile {
-    let p = if is_car { Preset::Car } else { Preset::Tabletop };
     let t = if std::env::var("BOSON").is_ok() { ThermalPreset::Boson } else { ThermalPreset::Lepton };
+    scene_with(seed, is_car, t)
+}
+
+fn scene_with(seed: u64, is_car: bool, t: ThermalPreset) -> SceneFile {
+    let p = if is_car { Preset::Car } else { Preset::Tabletop };
     preset_scene(model(), p, t, seed).unwrap()
 }
 
@@ -136,4 +140,95 @@ fn stage2_gradient_matches_finite_differences() {
     }
     assert!(gmax > 1e-3, "gradient vanishes: {gmax}");
     assert!(worst < 2e-3, "worst |fd − analytic| / max |g| = {worst:.2e}");
+}
+
+/// A car scene whose person the fit can represent exactly: the mean-adult shape and a pose the
+/// prior decodes exactly (its own decoding of the scene's pose).
+fn representable_car_capture(seed: u64, t: ThermalPreset) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
+    let mut sc = scene_with(seed, true, t);
+    sc.person.phenotype = irmirror_body::Phenotype::default();
+    let decoded = prior().decode(&prior().encode(&sc.person.rotvec_rad).unwrap()).unwrap();
+    for (j, r) in decoded.iter().enumerate().skip(1) {
+        sc.person.rotvec_rad[j] = irmirror_geom::rotation::matrix_to_axis_angle(r).into();
+    }
+    let sim = simulate(model(), &sc, seed).unwrap();
+    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc.objects.iter().zip(&sim.object_poses).map(|(o, p)| irmirror_render::sdf::PlacedSdf { sdf: o.shape.sdf(), depth_from_object: *p }).collect();
+    let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
+    let all = irmirror_render::reflect::reflect_camera(&sc.thermal_camera.intrinsics, &dft, &objs, &Default::default(), irmirror_render::reflect::Normals::Raw);
+    let rays = irmirror_recon::pipeline::unblocked(&all, &objs, &irmirror_recon::plane::Plane::camera_up(), &Default::default());
+    (sc, sim, rays)
+}
+
+/// Issue 8's test: on a capture with a noiseless mask and a person the model can represent
+/// (car seed 1, Boson: a 4300-pixel reflection of someone 2.5 m away; true objects), the fit
+/// from the truth stays within 5 cm, and from the truth moved 20 cm and turned 20° about the
+/// up axis (three directions) it returns within 5 cm.
+#[test]
+fn stage2_returns_from_perturbed_starts() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = representable_car_capture(1, ThermalPreset::Boson);
+    let root = sim.body.joints[0];
+    let (r0, up) = true_root(&sc, &sim);
+    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor: None };
+    let z = prior().encode(&sc.person.rotvec_rad).unwrap();
+    let cfg = HumanConfig::default();
+    let edge = edge_distance(&sim.reflection_mask);
+    let mut errors = Vec::new();
+    for (k, dt) in [Vector3::zeros(), Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.2), Vector3::new(-0.12, 0.12, 0.12)].iter().enumerate() {
+        let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
+        let start = HumanState { translation: root + dt, rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0, latent: z.clone() };
+        let (end, _) = problem.run(&start, &cfg, &edge, 7).unwrap().expect("no divergence");
+        errors.push((end.translation - root).norm());
+    }
+    eprintln!("root errors (truth, then three perturbed starts): {errors:.3?} m");
+    assert!(errors.iter().all(|&e| e < 0.05), "{errors:?}");
+}
+
+/// Diagnosis (run by hand: `SEEDS=0,1,2,3 cargo test --release -p irmirror-recon --test
+/// human -- --ignored perturbed --nocapture`): root error after fitting from the truth and from
+/// the truth moved 20 cm / turned 20° in three directions, true objects and mask.
+#[test]
+#[ignore]
+fn perturbed_starts_report() {
+    use irmirror_recon::human::*;
+    let seeds: Vec<u64> = std::env::var("SEEDS").map(|s| s.split(',').map(|x| x.parse().unwrap()).collect()).unwrap_or(vec![1]);
+    let mut cfg = HumanConfig::default();
+    if let Ok(a) = std::env::var("AGG") {
+        cfg.aggregation = if a == "product" { irmirror_render::Aggregation::Product } else { irmirror_render::Aggregation::Silhouette };
+    }
+    if let Ok(s) = std::env::var("SIGMA") {
+        let v: Vec<f64> = s.split(',').map(|x| x.parse().unwrap()).collect();
+        cfg.sigma_m2 = [v[0], v[1]];
+    }
+    if let Ok(n) = std::env::var("ITERS") {
+        cfg.iterations = n.parse().unwrap();
+    }
+    if let Ok(n) = std::env::var("RAYS") {
+        cfg.rays_per_iteration = n.parse().unwrap();
+    }
+    if std::env::var("NOEDGE").is_ok() {
+        cfg.edge_sampling = false;
+    }
+    for seed in seeds {
+        let (sc, sim, rays) = representable_car_capture(seed, ThermalPreset::Boson);
+        let root = sim.body.joints[0];
+        let (r0, up) = true_root(&sc, &sim);
+        let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor: None };
+        let z = prior().encode(&sc.person.rotvec_rad).unwrap();
+        let truth = HumanState { translation: root, rotation: r0, latent: z.clone() };
+        let (lt, it) = problem.full_loss(&truth, &cfg).unwrap();
+        let mask_px = sim.reflection_mask.data.iter().filter(|&&b| b).count();
+        eprintln!("seed {seed}: person {:.2} m, {mask_px} mask px, truth loss {lt:.3} soft IoU {it:.3}", root.norm());
+        let edge = edge_distance(&sim.reflection_mask);
+        for (k, dt) in [Vector3::zeros(), Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.2), Vector3::new(-0.12, 0.12, 0.12)].iter().enumerate() {
+            let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
+            let start = HumanState { translation: root + dt, rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0, latent: z.clone() };
+            let t0 = std::time::Instant::now();
+            let (end, _) = problem.run(&start, &cfg, &edge, 7).unwrap().unwrap();
+            let (l1, i1) = problem.full_loss(&end, &cfg).unwrap();
+            let d = end.translation - root;
+            let along = d.dot(&(root - sim.object_poses[0].translation).normalize());
+            eprintln!("  start {k}: error {:.3} m (along mirror→person {along:+.3}), loss {l1:.3} IoU {i1:.3}, {:.1} s", d.norm(), t0.elapsed().as_secs_f64());
+        }
+    }
 }

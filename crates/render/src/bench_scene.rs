@@ -100,7 +100,7 @@ impl BenchScene {
             camera,
             sphere,
             sphere_center_radius: (centre, f.reflector.radius),
-            occupancy: OccupancyParams { sigma_m2: f.occupancy.sigma_m2, epsilon: 1e-4 },
+            occupancy: OccupancyParams { sigma_m2: f.occupancy.sigma_m2, epsilon: 1e-4, ..Default::default() },
             vertices: f.mesh.vertices.iter().map(|v| Vector3::from(*v)).collect(),
             triangles: f.mesh.faces,
             target: mask(&f.target.file)?,

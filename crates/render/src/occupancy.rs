@@ -19,12 +19,23 @@
 //! Pierced triangles are always inside the query. [`Culling::Dense`] visits every ray × every
 //! triangle (the paper's SoftRas extension), for tests and the benchmark ratio.
 //!
+//! **Aggregation.** [`Aggregation::Product`] is the above (SoftRas). It sums the influence of
+//! every nearby triangle, so its soft silhouette crosses 0.5 outside the true one (≈ 1.5 √σ on a
+//! body mesh) and inside it dips wherever a ray passes near a mesh edge. [`Aggregation::Silhouette`]
+//! uses one distance per ray, to the mesh's silhouette as seen along that ray:
+//! `I = sigmoid(±d²/σ)`, + when the half-line hits the mesh. A miss's `d` is its distance to the
+//! nearest triangle (that point lies on the silhouette); a hit's is its distance to the nearest
+//! *exposed* contour edge — an edge between a face turned towards the ray and one turned away (or
+//! a boundary edge) such that the ray moved just past it misses the mesh (a contour behind
+//! another part of the body is not the silhouette). `I` is 0.5 exactly on the silhouette and
+//! saturates inside; its gradient reaches the one triangle or edge that sets `d`.
+//!
 //! **Autodiff.** These gradients are hand-written; an autodiff graph (the pose prior's decoder)
 //! takes them through the surrogate `L̃ = Σ V ⊙ stop_grad(∂L/∂V)`, whose gradient w.r.t. the
 //! graph's inputs equals the chain rule through the renderer.
 
 use crate::bvh::{Bvh, inverse_dir};
-use crate::distance::{PairDistance, ray_triangle_distance};
+use crate::distance::{PairDistance, ray_triangle, ray_triangle_distance, segment_ray};
 use crate::reflect::ReflectedRays;
 use irmirror_geom::Real;
 use nalgebra::Vector3;
@@ -42,6 +53,20 @@ pub struct OccupancyParams {
     pub sigma_m2: f64,
     /// Influence `D` below which non-pierced triangles are culled.
     pub epsilon: f64,
+    /// How the triangles' influences combine.
+    #[serde(default)]
+    pub aggregation: Aggregation,
+}
+
+/// How a ray's occupancy is formed from the mesh (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Aggregation {
+    /// SoftRas: `I = 1 − Π_j (1 − D_ij)` over all triangles.
+    #[default]
+    Product,
+    /// `I = sigmoid(±d²/σ)`, `d` the distance to the silhouette seen along the ray.
+    Silhouette,
 }
 
 impl Default for OccupancyParams {
@@ -51,7 +76,7 @@ impl Default for OccupancyParams {
     /// (cull radius 4.0 σ^½ instead of 3.0 σ^½) it differs by 2e-5, for 1.5× the time
     /// (`irmirror bench render`).
     fn default() -> Self {
-        Self { sigma_m2: 1e-4, epsilon: 1e-7 }
+        Self { sigma_m2: 1e-4, epsilon: 1e-7, aggregation: Aggregation::Product }
     }
 }
 
@@ -99,6 +124,32 @@ pub struct SoftRenderer<T: Real> {
     spheres: Vec<(Vector3<T>, T)>,
     /// Per ray-chunk sparse vertex-gradient contributions, reused across calls.
     contributions: Vec<Vec<(u32, Vector3<T>)>>,
+    /// Unit face normals (zero for degenerate faces), for contour edges.
+    normals: Vec<Vector3<T>>,
+    /// Mesh edges: vertices and the (up to two) faces that share them.
+    edges: Vec<Edge>,
+    /// Per triangle: its three edges (`edges` indices), edge k from vertex k to k + 1.
+    tri_edges: Vec<[u32; 3]>,
+}
+
+/// No face (a boundary edge's second side).
+const NO_FACE: u32 = u32::MAX;
+
+#[derive(Clone, Copy, Debug)]
+struct Edge {
+    v: [u32; 2],
+    /// The first face that has the edge, and the second (`NO_FACE` on a boundary). A third
+    /// face of a non-manifold edge is ignored.
+    f: [u32; 2],
+}
+
+/// The mesh element that sets a ray's distance under [`Aggregation::Silhouette`].
+#[derive(Clone, Copy, Debug)]
+pub struct Nearest<T: Real> {
+    /// Its vertices (an edge repeats its second vertex with weight 0).
+    pub vertices: [u32; 3],
+    /// The closest pair; `pierced` is true when the ray hits the mesh (the sign of `x`).
+    pub pair: PairDistance<T>,
 }
 
 /// Per-ray result of the forward pass.
@@ -112,6 +163,9 @@ pub struct Occupancy<T: Real> {
     pub pairs_per_ray: Vec<u32>,
     /// Ray–triangle pairs evaluated in all (for statistics).
     pub pairs: u64,
+    /// [`Aggregation::Silhouette`]: per ray, what sets its distance (`None`: nothing within the
+    /// cull radius, so `I` is saturated and has no gradient). Empty for `Product`.
+    pub nearest: Vec<Option<Nearest<T>>>,
 }
 
 /// Gradients of a loss w.r.t. the mesh and the rays.
@@ -134,7 +188,27 @@ impl<T: Real> SoftRenderer<T> {
             bvh: Bvh::build(vertices, triangles),
             spheres: vec![(Vector3::zeros(), T::zero()); triangles.len()],
             contributions: Vec::new(),
+            normals: vec![Vector3::zeros(); triangles.len()],
+            edges: Vec::new(),
+            tri_edges: Vec::with_capacity(triangles.len()),
         };
+        let mut index = std::collections::HashMap::with_capacity(triangles.len() * 3 / 2);
+        for (f, tri) in triangles.iter().enumerate() {
+            let mut ids = [0u32; 3];
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let id = *index.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    r.edges.push(Edge { v: [a, b], f: [f as u32, NO_FACE] });
+                    (r.edges.len() - 1) as u32
+                });
+                let e = &mut r.edges[id as usize];
+                if e.f[0] != f as u32 && e.f[1] == NO_FACE {
+                    e.f[1] = f as u32;
+                }
+                ids[k] = id;
+            }
+            r.tri_edges.push(ids);
+        }
         r.update_spheres();
         r
     }
@@ -148,11 +222,12 @@ impl<T: Real> SoftRenderer<T> {
 
     fn update_spheres(&mut self) {
         let (v, t) = (&self.vertices, &self.triangles);
-        self.spheres.par_iter_mut().zip(t.par_iter()).for_each(|(s, tri)| {
+        self.spheres.par_iter_mut().zip(self.normals.par_iter_mut()).zip(t.par_iter()).for_each(|((s, n), tri)| {
             let [a, b, c] = tri.map(|i| v[i as usize]);
             let m = (a + b + c) / T::of(3.0);
             let r2 = (a - m).norm_squared().max((b - m).norm_squared()).max((c - m).norm_squared());
             *s = (m, r2.sqrt());
+            *n = (b - a).cross(&(c - a)).try_normalize(T::zero()).unwrap_or_else(Vector3::zeros);
         });
     }
 
@@ -175,44 +250,127 @@ impl<T: Real> SoftRenderer<T> {
         self.triangles[t as usize].map(|v| self.vertices[v as usize])
     }
 
+    /// Visits the triangles that may lie within `radius` of the half-line (every one for
+    /// [`Culling::Dense`]); pierced triangles are always visited.
+    #[inline]
+    fn for_each_near(&self, o: &Vector3<T>, r: &Vector3<T>, radius: T, culling: Culling, mut visit: impl FnMut(u32)) {
+        match culling {
+            Culling::Dense => (0..self.triangles.len() as u32).for_each(visit),
+            Culling::Bvh => self.bvh.for_each_near_ray(o, &inverse_dir(r), radius, |t| {
+                // A triangle whose bounding sphere is farther than the radius is neither
+                // pierced nor influential.
+                let (c, rho) = self.spheres[t as usize];
+                let s = (c - o).dot(r).max(T::zero());
+                let reach = radius + rho;
+                if (o + r * s - c).norm_squared() <= reach * reach {
+                    visit(t);
+                }
+            }),
+        }
+    }
+
     /// Visits the pairs of one ray that contribute: `f(triangle, pair distance, x)`.
     #[inline]
     fn for_each_pair(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, mut f: impl FnMut(u32, &[Vector3<T>; 3], &PairDistance<T>, T)) {
         let inv_sigma = T::of(1.0 / p.sigma_m2);
-        match culling {
-            Culling::Dense => {
-                for t in 0..self.triangles.len() as u32 {
-                    let tri = self.tri(t);
-                    let pd = ray_triangle_distance(o, r, &tri);
-                    let x = if pd.pierced { pd.d2 * inv_sigma } else { -pd.d2 * inv_sigma };
-                    f(t, &tri, &pd, x);
+        let cull = match culling {
+            Culling::Dense => T::max_value().unwrap_or(T::one()),
+            Culling::Bvh => T::of(p.cull_d2()),
+        };
+        self.for_each_near(o, r, T::of(p.cull_d2()).sqrt(), culling, |t| {
+            let tri = self.tri(t);
+            let pd = ray_triangle_distance(o, r, &tri);
+            if pd.pierced || pd.d2 <= cull {
+                let x = if pd.pierced { pd.d2 * inv_sigma } else { -pd.d2 * inv_sigma };
+                f(t, &tri, &pd, x);
+            }
+        });
+    }
+
+    /// Does the half-line hit the mesh?
+    fn hits(&self, o: &Vector3<T>, r: &Vector3<T>, culling: Culling) -> bool {
+        let mut hit = false;
+        self.for_each_near(o, r, T::zero(), culling, |t| {
+            hit = hit || ray_triangle(o, r, &self.tri(t)).is_some();
+        });
+        hit
+    }
+
+    /// [`Aggregation::Silhouette`] for one ray: `(x, what sets it, triangles visited)`.
+    /// `near` and `cand` are scratch.
+    fn silhouette_ray(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, near: &mut Vec<u32>, cand: &mut Vec<(T, T, T, u32)>) -> (T, Option<Nearest<T>>, u32) {
+        let inv_sigma = T::of(1.0 / p.sigma_m2);
+        let cull = T::of(p.cull_d2());
+        near.clear();
+        self.for_each_near(o, r, cull.sqrt(), culling, |t| near.push(t));
+        let visited = near.len() as u32;
+        let hit = near.iter().any(|&t| ray_triangle(o, r, &self.tri(t)).is_some());
+        if !hit {
+            // The nearest point of the mesh to a missing ray is on its silhouette.
+            let mut best: Option<Nearest<T>> = None;
+            for &t in near.iter() {
+                let pd = ray_triangle_distance(o, r, &self.tri(t));
+                if pd.d2 <= cull && best.is_none_or(|b| pd.d2 < b.pair.d2) {
+                    best = Some(Nearest { vertices: self.triangles[t as usize], pair: pd });
                 }
             }
-            Culling::Bvh => {
-                let cull = T::of(p.cull_d2());
-                let radius = cull.sqrt();
-                self.bvh.for_each_near_ray(o, &inverse_dir(r), radius, |t| {
-                    // A triangle whose bounding sphere is farther than the cull radius is
-                    // neither pierced nor influential.
-                    let (c, rho) = self.spheres[t as usize];
-                    let s = (c - o).dot(r).max(T::zero());
-                    let reach = radius + rho;
-                    if (o + r * s - c).norm_squared() > reach * reach {
-                        return;
-                    }
-                    let tri = self.tri(t);
-                    let pd = ray_triangle_distance(o, r, &tri);
-                    if pd.pierced || pd.d2 <= cull {
-                        let x = if pd.pierced { pd.d2 * inv_sigma } else { -pd.d2 * inv_sigma };
-                        f(t, &tri, &pd, x);
-                    }
-                });
+            let x = best.map_or(-cull * inv_sigma, |b| -b.pair.d2 * inv_sigma);
+            return (x, best, visited);
+        }
+        // Contour edges near the ray, nearest first; the first exposed one is the silhouette.
+        cand.clear();
+        for &t in near.iter() {
+            for &e in &self.tri_edges[t as usize] {
+                let edge = self.edges[e as usize];
+                // Each edge once: from its first face (both faces are visited when it is near).
+                if edge.f[0] != t {
+                    continue;
+                }
+                let contour = edge.f[1] == NO_FACE || self.normals[edge.f[0] as usize].dot(r) * self.normals[edge.f[1] as usize].dot(r) <= T::zero();
+                if !contour {
+                    continue;
+                }
+                let [a, b] = edge.v.map(|v| self.vertices[v as usize]);
+                let (d2, u, s) = segment_ray(&a, &b, o, r);
+                if d2 <= cull {
+                    cand.push((d2, u, s, e));
+                }
             }
         }
+        cand.sort_unstable_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
+        // Just past an edge: 1 % of σ^½ beyond it.
+        let past = T::of(0.01 * p.sigma_m2.sqrt());
+        for &(d2, u, s, e) in cand.iter() {
+            let [ia, ib] = self.edges[e as usize].v;
+            let (a, b) = (self.vertices[ia as usize], self.vertices[ib as usize]);
+            let w = a + (b - a) * u - (o + r * s);
+            let w_perp = w - r * w.dot(r);
+            let n = w_perp.norm();
+            let exposed = n <= past * T::of(1e-3) || !self.hits(&(o + w_perp * ((n + past) / n)), r, culling);
+            if exposed {
+                let pair = PairDistance { d2, s, bary: [T::one() - u, u, T::zero()], pierced: true };
+                return (d2 * inv_sigma, Some(Nearest { vertices: [ia, ib, ib], pair }), visited);
+            }
+        }
+        (cull * inv_sigma, None, visited)
     }
 
     /// `I_i` for every ray.
     pub fn forward(&self, rays: &ReflectedRays<T>, params: &OccupancyParams, culling: Culling) -> Occupancy<T> {
+        if params.aggregation == Aggregation::Silhouette {
+            let results: Vec<(T, Option<Nearest<T>>, u32)> = (0..rays.len())
+                .into_par_iter()
+                .with_min_len(4)
+                .map_init(|| (Vec::new(), Vec::new()), |(near, cand), i| self.silhouette_ray(&rays.origin[i], &rays.dir[i], params, culling, near, cand))
+                .collect();
+            return Occupancy {
+                value: results.iter().map(|r| sigmoid(r.0)).collect(),
+                log_complement: results.iter().map(|r| -softplus(r.0)).collect(),
+                pairs_per_ray: results.iter().map(|r| r.2).collect(),
+                pairs: results.iter().map(|r| u64::from(r.2)).sum(),
+                nearest: results.iter().map(|r| r.1).collect(),
+            };
+        }
         let results: Vec<(T, u32)> = (0..rays.len())
             .into_par_iter()
             .with_min_len(4)
@@ -231,6 +389,7 @@ impl<T: Real> SoftRenderer<T> {
             log_complement: results.iter().map(|(l, _)| *l).collect(),
             pairs_per_ray: results.iter().map(|r| r.1).collect(),
             pairs: results.iter().map(|r| u64::from(r.1)).sum(),
+            nearest: Vec::new(),
         }
     }
 
@@ -274,6 +433,21 @@ impl<T: Real> SoftRenderer<T> {
                         continue;
                     }
                     let (o, r) = (&rays.origin[i], &rays.dir[i]);
+                    if params.aggregation == Aggregation::Silhouette {
+                        // ∂L/∂x = g I (1 − I); x = ±d²/σ.
+                        let Some(Some(near)) = occ.nearest.get(i) else { continue };
+                        let v = occ.value[i];
+                        let dx = g * v * (T::one() - v);
+                        let dd2 = if near.pair.pierced { dx * inv_sigma } else { -dx * inv_sigma };
+                        let tri = near.vertices.map(|k| this.vertices[k as usize]);
+                        let pg = near.pair.grad(o, r, &tri);
+                        d_o[k] += pg.origin * dd2;
+                        d_r[k] += pg.dir * dd2;
+                        for (v, gv) in near.vertices.iter().zip(pg.vertices) {
+                            contrib.push((*v, gv * dd2));
+                        }
+                        continue;
+                    }
                     // ∂L/∂x_ij = g (1 − I_i) D_ij; x = λ d²/σ.
                     let scale = g * occ.log_complement[i].exp();
                     this.for_each_pair(o, r, params, culling, |t, tri, pd, x| {

@@ -3,7 +3,7 @@
 
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_render::hard::hard_mask;
-use irmirror_render::{Culling, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer, soft_iou_loss};
+use irmirror_render::{Aggregation, Culling, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer, soft_iou_loss};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -68,8 +68,8 @@ fn loss_and_grad(verts: &[V], tris: &[[u32; 3]], rays: &ReflectedRays<f64>, targ
 fn gradients_match_finite_differences() {
     // σ = (1 cm)² against 3 cm triangles: D is neither saturated nor negligible for most pairs;
     // rays are jittered off edges and vertices, so the closest-point maps are smooth here.
-    let p = OccupancyParams { sigma_m2: 1e-4, epsilon: 1e-4 };
-    for culling in [Culling::Dense, Culling::Bvh] {
+    for (aggregation, culling) in [(Aggregation::Product, Culling::Dense), (Aggregation::Product, Culling::Bvh), (Aggregation::Silhouette, Culling::Dense), (Aggregation::Silhouette, Culling::Bvh)] {
+        let p = OccupancyParams { sigma_m2: 1e-4, epsilon: 1e-4, aggregation };
         let (verts, tris, rays, target) = scene(1);
         let (l0, g, _) = loss_and_grad(&verts, &tris, &rays, &target, &p, culling);
         assert!(l0 > 0.05 && l0 < 0.95, "loss {l0}");
@@ -81,11 +81,11 @@ fn gradients_match_finite_differences() {
                 vp[vi][k] += h;
                 vm[vi][k] -= h;
                 let fd = (loss(&vp, &tris, &rays, &target, &p, culling) - loss(&vm, &tris, &rays, &target, &p, culling)) / (2.0 * h);
-                assert!((fd - g.vertices[vi][k]).abs() < 1e-5 * (1.0 + fd.abs()), "{culling:?} vertex {vi}[{k}]: fd {fd} vs {}", g.vertices[vi][k]);
+                assert!((fd - g.vertices[vi][k]).abs() < 1e-5 * (1.0 + fd.abs()), "{aggregation:?} {culling:?} vertex {vi}[{k}]: fd {fd} vs {}", g.vertices[vi][k]);
                 checked += usize::from(fd.abs() > 1e-3);
             }
         }
-        assert!(checked > 10, "too few vertices with a visible gradient");
+        assert!(checked > 10, "{aggregation:?}: too few vertices with a visible gradient ({checked})");
         for i in (0..rays.len()).step_by(7) {
             for k in 0..3 {
                 let (mut rp, mut rm) = (rays.clone(), rays.clone());
@@ -108,7 +108,7 @@ fn culled_equals_dense_on_random_scenes() {
     for seed in 0..8 {
         let (verts, tris, rays, target) = scene(seed);
         // ε = 1e-7: the culled pairs' total influence is then far below the 1e-5 tolerance.
-        let p = OccupancyParams { sigma_m2: 4e-5, epsilon: 1e-7 };
+        let p = OccupancyParams { sigma_m2: 4e-5, epsilon: 1e-7, ..Default::default() };
         let (ld, gd, id) = loss_and_grad(&verts, &tris, &rays, &target, &p, Culling::Dense);
         let (lc, gc, ic) = loss_and_grad(&verts, &tris, &rays, &target, &p, Culling::Bvh);
         assert!((ld - lc).abs() < 1e-5, "seed {seed}: loss {ld} vs {lc}");
@@ -120,11 +120,20 @@ fn culled_equals_dense_on_random_scenes() {
             assert!((a - b).abs() < 1e-5);
         }
         // With the default ε = 1e-4 every ray's occupancy is within (culled pairs) × ε.
-        let p4 = OccupancyParams { sigma_m2: 4e-5, epsilon: 1e-4 };
+        let p4 = OccupancyParams { sigma_m2: 4e-5, epsilon: 1e-4, ..Default::default() };
         let (_, _, id4) = loss_and_grad(&verts, &tris, &rays, &target, &p4, Culling::Dense);
         let (_, _, ic4) = loss_and_grad(&verts, &tris, &rays, &target, &p4, Culling::Bvh);
         for (a, b) in id4.iter().zip(&ic4) {
             assert!((a - b).abs() <= tris.len() as f64 * 1e-4 && b <= a);
+        }
+        // The silhouette form visits the same elements either way (the cull radius bounds its
+        // distances in both): identical.
+        let ps = OccupancyParams { aggregation: Aggregation::Silhouette, ..p4 };
+        let (ld, gd, id) = loss_and_grad(&verts, &tris, &rays, &target, &ps, Culling::Dense);
+        let (lc, gc, ic) = loss_and_grad(&verts, &tris, &rays, &target, &ps, Culling::Bvh);
+        assert_eq!((ld, id), (lc, ic), "seed {seed}");
+        for (a, b) in gd.vertices.iter().zip(&gc.vertices) {
+            assert!((a - b).amax() <= 1e-12 * (1.0 + a.amax()), "seed {seed}: {a:?} vs {b:?}");
         }
     }
 }
@@ -132,27 +141,132 @@ fn culled_equals_dense_on_random_scenes() {
 #[test]
 fn occupancy_is_a_probability_and_tends_to_the_hard_mask() {
     let (verts, tris, rays, _) = scene(3);
-    for sigma in [1e-2, 1e-4, 1e-6] {
+    for aggregation in [Aggregation::Product, Aggregation::Silhouette] {
+        for sigma in [1e-2, 1e-4, 1e-6] {
+            let r = SoftRenderer::new(&verts, &tris);
+            let occ = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-4, aggregation }, Culling::Bvh);
+            assert!(occ.value.iter().all(|&v| (0.0..=1.0).contains(&v)));
+        }
         let r = SoftRenderer::new(&verts, &tris);
-        let occ = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-4 }, Culling::Bvh);
-        assert!(occ.value.iter().all(|&v| (0.0..=1.0).contains(&v)));
+        let hard = hard_mask(&rays, r.bvh(), &verts, &tris);
+        let occ = r.forward(&rays, &OccupancyParams { sigma_m2: 1e-10, epsilon: 1e-4, aggregation }, Culling::Bvh);
+        let mut n_hit = 0;
+        for (i, &v) in occ.value.iter().enumerate() {
+            let h = hard[rays.pixel[i] as usize];
+            n_hit += usize::from(h);
+            assert!((v - if h { 1.0 } else { 0.0 }).abs() < 1e-3, "{aggregation:?} ray {i}: soft {v}, hard {h}");
+        }
+        assert!(n_hit > 10 && n_hit < rays.len() - 10);
     }
+}
+
+/// A closed UV sphere (`rings` latitude bands, `segments` longitudes; a vertex ring on the
+/// equator when `rings` is even).
+fn uv_sphere(centre: V, radius: f64, rings: u32, segments: u32) -> (Vec<V>, Vec<[u32; 3]>) {
+    let mut v = vec![centre + V::new(0.0, 0.0, -radius)];
+    for i in 1..rings {
+        let th = std::f64::consts::PI * f64::from(i) / f64::from(rings) - std::f64::consts::FRAC_PI_2;
+        for j in 0..segments {
+            let ph = std::f64::consts::TAU * f64::from(j) / f64::from(segments);
+            v.push(centre + V::new(th.cos() * ph.cos(), th.cos() * ph.sin(), th.sin()) * radius);
+        }
+    }
+    v.push(centre + V::new(0.0, 0.0, radius));
+    let top = v.len() as u32 - 1;
+    let at = |i: u32, j: u32| 1 + (i - 1) * segments + j % segments;
+    let mut t = Vec::new();
+    for j in 0..segments {
+        t.push([0, at(1, j + 1), at(1, j)]);
+        t.push([top, at(rings - 1, j), at(rings - 1, j + 1)]);
+        for i in 1..rings - 1 {
+            t.push([at(i, j), at(i, j + 1), at(i + 1, j + 1)]);
+            t.push([at(i, j), at(i + 1, j + 1), at(i + 1, j)]);
+        }
+    }
+    (v, t)
+}
+
+/// Rays along +z from z = −2 through `(x, y)`.
+fn parallel_rays(xy: &[(f64, f64)]) -> ReflectedRays<f64> {
+    let mut rays = ReflectedRays { width: xy.len() as u32, height: 1, ..Default::default() };
+    for (p, &(x, y)) in xy.iter().enumerate() {
+        rays.pixel.push(p as u32);
+        rays.object.push(0);
+        rays.origin.push(V::new(x, y, -2.0));
+        rays.dir.push(V::z());
+        rays.normal.push(V::z());
+    }
+    rays
+}
+
+/// Closed form: parallel rays past a UV sphere seen along its axis. Its silhouette is the
+/// equator polygon; on the bisector of an equator edge (distance `h = R cos(π/n)` from the axis)
+/// the distance of a ray at radius ρ to the silhouette is |ρ − h|, so the silhouette occupancy
+/// is exactly `sigmoid(sign(h − ρ) (ρ − h)²/σ)`: 0.5 on the silhouette. SoftRas' product is
+/// above 0.5 outside it (the two faces at the edge both count), and dips inside near edges.
+#[test]
+fn silhouette_occupancy_is_half_on_a_spheres_outline() {
+    let (radius, n) = (0.3, 48u32);
+    let (verts, tris) = uv_sphere(V::new(0.0, 0.0, 1.0), radius, 24, n);
     let r = SoftRenderer::new(&verts, &tris);
-    let hard = hard_mask(&rays, r.bvh(), &verts, &tris);
-    let occ = r.forward(&rays, &OccupancyParams { sigma_m2: 1e-10, epsilon: 1e-4 }, Culling::Bvh);
-    let mut n_hit = 0;
-    for (i, &v) in occ.value.iter().enumerate() {
-        let h = hard[rays.pixel[i] as usize];
-        n_hit += usize::from(h);
-        assert!((v - if h { 1.0 } else { 0.0 }).abs() < 1e-3, "ray {i}: soft {v}, hard {h}");
+    let sigma = 1e-4;
+    let h = radius * (std::f64::consts::PI / f64::from(n)).cos();
+    let phi = std::f64::consts::PI / f64::from(n); // bisector of the edge from segment 0 to 1
+    let rho: Vec<f64> = (-30..=30).map(|k| h + f64::from(k) * 1e-3 + 1.3e-5).collect();
+    let rays = parallel_rays(&rho.iter().map(|&p| (p * phi.cos(), p * phi.sin())).collect::<Vec<_>>());
+    let sil = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-7, aggregation: Aggregation::Silhouette }, Culling::Bvh);
+    let prod = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-7, aggregation: Aggregation::Product }, Culling::Bvh);
+    for (k, &p) in rho.iter().enumerate() {
+        let x = if p < h { (p - h).powi(2) / sigma } else { -(p - h).powi(2) / sigma };
+        let expect = 1.0 / (1.0 + (-x).exp());
+        assert!((sil.value[k] - expect).abs() < 1e-9, "ρ − h = {:.4}: {} vs {expect}", p - h, sil.value[k]);
     }
-    assert!(n_hit > 10 && n_hit < rays.len() - 10);
+    // Half a σ^½ outside: the silhouette form is below 0.5 (0.44), the product above it.
+    let k = rho.iter().position(|&p| p > h + 0.5 * sigma.sqrt()).unwrap();
+    assert!(sil.value[k] < 0.45 && prod.value[k] > 0.55, "silhouette {} product {}", sil.value[k], prod.value[k]);
+    // Inside, across the mesh's edges and vertices: saturated.
+    let inner: Vec<(f64, f64)> = (0..200).map(|k| {
+        let (a, p) = (f64::from(k) * 0.0731, 0.2 * f64::from(k) / 200.0);
+        (p * a.cos(), p * a.sin())
+    }).collect();
+    let rays = parallel_rays(&inner);
+    let sil = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-7, aggregation: Aggregation::Silhouette }, Culling::Bvh);
+    let prod = r.forward(&rays, &OccupancyParams { sigma_m2: sigma, epsilon: 1e-7, aggregation: Aggregation::Product }, Culling::Bvh);
+    let min = |v: &[f64]| v.iter().copied().fold(1.0, f64::min);
+    assert!(min(&sil.value) > 1.0 - 1e-6, "silhouette inside: {}", min(&sil.value));
+    assert!(min(&prod.value) < 0.99, "the product's dip near edges is expected: {}", min(&prod.value));
+}
+
+/// A contour behind another part of the mesh is not the silhouette: rays past the outline of a
+/// small sphere in front of a large one still hit the large one, and stay saturated.
+#[test]
+fn hidden_contours_do_not_count() {
+    let (mut verts, mut tris) = uv_sphere(V::new(0.0, 0.0, 1.0), 0.3, 24, 48);
+    let (v2, t2) = uv_sphere(V::new(0.05, 0.0, 0.5), 0.1, 16, 32);
+    let off = verts.len() as u32;
+    verts.extend(v2);
+    tris.extend(t2.iter().map(|t| t.map(|i| i + off)));
+    let r = SoftRenderer::new(&verts, &tris);
+    // Around the small sphere's outline, ±1 cm (σ^½).
+    let xy: Vec<(f64, f64)> = (0..120).map(|k| {
+        let a = f64::from(k) * 0.0523 + 0.01;
+        let p = 0.1 + 0.01 * ((f64::from(k) * 0.37).sin());
+        (0.05 + p * a.cos(), p * a.sin())
+    }).collect();
+    let rays = parallel_rays(&xy);
+    let occ = r.forward(&rays, &OccupancyParams { sigma_m2: 1e-4, epsilon: 1e-7, aggregation: Aggregation::Silhouette }, Culling::Bvh);
+    let min = occ.value.iter().copied().fold(1.0, f64::min);
+    assert!(min > 1.0 - 1e-6, "a hidden contour lowered the occupancy to {min}");
+    // The same rays with the large sphere gone see the small one's silhouette.
+    let small = SoftRenderer::new(&verts[off as usize..], &tris[tris.len() - (tris.len() - 2 * 48 * 23)..].iter().map(|t| t.map(|i| i - off)).collect::<Vec<_>>());
+    let occ = small.forward(&rays, &OccupancyParams { sigma_m2: 1e-4, epsilon: 1e-7, aggregation: Aggregation::Silhouette }, Culling::Bvh);
+    assert!(occ.value.iter().any(|&v| v < 0.4) && occ.value.iter().any(|&v| v > 0.6 && v < 0.999));
 }
 
 #[test]
 fn rigid_motion_of_mesh_and_rays_leaves_occupancy_unchanged() {
     let (verts, tris, rays, _) = scene(4);
-    let p = OccupancyParams::default();
+    for p in [OccupancyParams::default(), OccupancyParams { aggregation: Aggregation::Silhouette, ..Default::default() }] {
     let base = SoftRenderer::new(&verts, &tris).forward(&rays, &p, Culling::Bvh).value;
     let rot = axis_angle_to_matrix(&V::new(0.4, -1.2, 0.3));
     let t = V::new(1.0, -2.0, 0.5);
@@ -163,6 +277,7 @@ fn rigid_motion_of_mesh_and_rays_leaves_occupancy_unchanged() {
     let after = SoftRenderer::new(&moved, &tris).forward(&mrays, &p, Culling::Bvh).value;
     for (a, b) in base.iter().zip(&after) {
         assert!((a - b).abs() < 1e-9);
+    }
     }
 }
 
@@ -191,7 +306,9 @@ fn degenerate_triangles_and_grazing_rays_stay_finite() {
         rays.dir.push(d);
         rays.normal.push(V::z());
     }
-    let (l, g, v) = loss_and_grad(&verts, &tris, &rays, &[1.0, 0.0], &OccupancyParams::default(), Culling::Bvh);
-    assert!(l.is_finite() && v.iter().all(|x| x.is_finite()));
-    assert!(g.vertices.iter().chain(&g.origin).chain(&g.dir).all(|x| x.iter().all(|c| c.is_finite())));
+    for p in [OccupancyParams::default(), OccupancyParams { aggregation: Aggregation::Silhouette, ..Default::default() }] {
+        let (l, g, v) = loss_and_grad(&verts, &tris, &rays, &[1.0, 0.0], &p, Culling::Bvh);
+        assert!(l.is_finite() && v.iter().all(|x| x.is_finite()));
+        assert!(g.vertices.iter().chain(&g.origin).chain(&g.dir).all(|x| x.iter().all(|c| c.is_finite())));
+    }
 }
