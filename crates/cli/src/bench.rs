@@ -26,6 +26,10 @@ pub enum BenchCommand {
         /// triangles are skipped); each is compared with the one dense run.
         #[arg(long, value_delimiter = ',', default_values_t = [1e-4, 1e-7])]
         epsilon: Vec<f64>,
+        /// How triangles form a ray's occupancy: `product` (SoftRas, the scene's definition) or
+        /// `silhouette` (distance to the silhouette, what stage 2 uses).
+        #[arg(long, value_enum, default_value_t = AggregationArg::Product)]
+        aggregation: AggregationArg,
     },
     /// Stage 1 (support plane, segmentation, object fits) against the simulator's truth: one
     /// row per object and the median / 90th percentile / max per category.
@@ -88,7 +92,7 @@ pub(crate) fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
 /// Runs a benchmark.
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
-        BenchCommand::Render { scene, reps, no_dense, epsilon } => crate::bench_render::run(&scene, reps, no_dense, &epsilon),
+        BenchCommand::Render { scene, reps, no_dense, epsilon, aggregation } => crate::bench_render::run(&scene, reps, no_dense, &epsilon, aggregation.into()),
         BenchCommand::Objects { preset, seeds, segment, shapes, prior } => crate::bench_objects::run(preset, shapes.into(), prior.into(), seeds, segment),
         BenchCommand::Body { reps } => {
             let model = BodyModel::builtin()?;
@@ -122,3 +126,21 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
     }
 }
 
+
+/// `--aggregation` of `bench render`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AggregationArg {
+    /// SoftRas' product over triangles.
+    Product,
+    /// Distance to the silhouette.
+    Silhouette,
+}
+
+impl From<AggregationArg> for irmirror_render::Aggregation {
+    fn from(a: AggregationArg) -> Self {
+        match a {
+            AggregationArg::Product => Self::Product,
+            AggregationArg::Silhouette => Self::Silhouette,
+        }
+    }
+}

@@ -7,7 +7,7 @@ use irmirror_geom::nalgebra::Vector3;
 use irmirror_render::bench_scene::BenchScene;
 use irmirror_render::hard::hard_mask;
 use irmirror_render::{
-    Culling, Normals, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer, SurfaceMethod, TraceParams, reflect_camera, soft_iou_loss,
+    Aggregation, Culling, Normals, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer, SurfaceMethod, TraceParams, reflect_camera, soft_iou_loss,
 };
 use std::path::Path;
 use std::time::Instant;
@@ -56,11 +56,12 @@ fn pass(
 }
 
 /// Runs the benchmark and prints its tables.
-pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64]) -> Result<()> {
+pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64], aggregation: Aggregation) -> Result<()> {
     if let Some(e) = epsilons.iter().find(|e| !(**e > 0.0 && **e < 0.5)) {
         bail!("--epsilon must be in (0, 0.5), got {e}");
     }
-    let scene = BenchScene::load(path)?;
+    let mut scene = BenchScene::load(path)?;
+    scene.occupancy.aggregation = aggregation;
     // The scene's reflector is an exact sphere: trace it to 1e-6 of its radius.
     let trace = TraceParams { coarse_tol_rel: 1e-6, method: SurfaceMethod::SphereTrace { steps: 3 }, max_iters: 4096 };
     let t0 = Instant::now();
@@ -80,7 +81,7 @@ pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64]) -> Result
         union += usize::from(*h || r);
     }
     println!(
-        "scene {}: {}×{} camera, {} reflected rays ({rays_ms:.1} ms to trace), {} triangles, σ = {} m², {} threads, f32",
+        "scene {}: {}×{} camera, {} reflected rays ({rays_ms:.1} ms to trace), {} triangles, σ = {} m², {aggregation:?} aggregation, {} threads, f32",
         path.display(),
         scene.camera.width,
         scene.camera.height,

@@ -22,7 +22,7 @@ pub fn run(out: &Path, cfg: TrainConfig, progress: bool) -> Result<()> {
     std::fs::rename(&tmp, out).with_context(|| format!("cannot write {}", out.display()))?;
     let json = serde_json::to_string_pretty(&report)?;
     std::fs::write(out.with_extension("json"), &json).with_context(|| format!("cannot write {}", out.with_extension("json").display()))?;
-    let prior = PosePrior::new(PoseVae::load(out, candle_core::DType::F32)?);
+    let prior = PosePrior::new(PoseVae::load(out, candle_core::DType::F32)?)?;
     save_png(&sample_grid(&model, &prior, cfg.seed, 4, 6)?, &out.with_extension("png"))?;
     println!("{json}");
     println!("wrote {}, {}, {}", out.display(), out.with_extension("json").display(), out.with_extension("png").display());

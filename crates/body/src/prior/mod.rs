@@ -7,8 +7,10 @@
 //! | latent `z` (32) | — (prior N(0, I)) | yes: [`PosePrior::decode_vjp`] |
 //! | decoded joint rotations 1…35 | rotation matrices, world-aligned rest axes | — |
 //!
-//! Gradients of an image loss reach `z` through candle's autodiff with the surrogate
-//! `Σ R ⊙ stop_grad(∂L/∂R)`; the prior term is `‖z‖²`.
+//! Gradients of an image loss reach `z` by a hand-written VJP of the decoder (three linear
+//! layers, SiLU, Gram–Schmidt) in f64: candle's backward of a matmul always forms the weight
+//! gradient too (a 512×512 outer product and its accumulation per call), which was most of a
+//! stage-2 step. Training uses candle's autodiff. The prior term is `‖z‖²`.
 
 pub mod generator;
 pub mod limits;
@@ -17,8 +19,8 @@ pub mod train;
 pub mod vae;
 
 use candle_core::{DType, Tensor};
-use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd};
-use nalgebra::{Matrix3, Vector3};
+use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd, sixd_to_matrix_vjp};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector6};
 pub use vae::{JOINTS, LATENT, PoseVae, PriorError};
 
 /// The shipped weights (see `assets/pose_prior/README.md`).
@@ -27,30 +29,34 @@ pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../../../assets/pose_prior
 /// The prior, ready to decode.
 pub struct PosePrior {
     vae: PoseVae,
+    /// The decoder's weights and biases in f64 (`dec1`, `dec2`, `dec3`), for the hand-written
+    /// VJP (module docs).
+    decoder: [(DMatrix<f64>, DVector<f64>); 3],
 }
 
 impl PosePrior {
     /// Wraps a network.
-    pub fn new(vae: PoseVae) -> Self {
-        Self { vae }
+    pub fn new(vae: PoseVae) -> Result<Self, PriorError> {
+        let layer = |name: &str| -> Result<(DMatrix<f64>, DVector<f64>), PriorError> {
+            let (w, b) = vae.layer_weights(name)?;
+            let (rows, cols) = w.dims2()?;
+            let w = w.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+            let b = b.to_dtype(DType::F64)?.to_vec1::<f64>()?;
+            Ok((DMatrix::from_row_slice(rows, cols, &w), DVector::from_vec(b)))
+        };
+        let decoder = [layer("dec1")?, layer("dec2")?, layer("dec3")?];
+        Ok(Self { vae: vae.frozen(), decoder })
     }
 
     /// The shipped prior in `dtype` (F32 for use, F64 for gradient tests).
     pub fn builtin(dtype: DType) -> Result<Self, PriorError> {
         let tensors = candle_core::safetensors::load_buffer(BUILTIN_WEIGHTS, &candle_core::Device::Cpu)?;
-        Ok(Self { vae: PoseVae::from_tensors(tensors, dtype)? })
+        Self::new(PoseVae::from_tensors(tensors, dtype)?)
     }
 
     /// The network.
     pub fn vae(&self) -> &PoseVae {
         &self.vae
-    }
-
-    fn latent(&self, z: &[f64]) -> Result<Tensor, PriorError> {
-        if z.len() != LATENT || z.iter().any(|x| !x.is_finite()) {
-            return Err(candle_core::Error::Msg(format!("the latent must hold {LATENT} finite values, got {}", z.len())).into());
-        }
-        Ok(Tensor::from_vec(z.to_vec(), (1, LATENT), self.vae.device())?.to_dtype(self.vae.dtype())?)
     }
 
     /// Decodes one latent to 36 rotations (index 0, the root, is the identity).
@@ -84,14 +90,30 @@ impl PosePrior {
             35 => d_rotations,
             n => return Err(candle_core::Error::Msg(format!("{n} rotation gradients, expected 35 or 36")).into()),
         };
-        let zv = candle_core::Var::from_tensor(&self.latent(z)?)?;
-        let r = self.vae.decode(zv.as_tensor())?;
-        let g: Vec<f64> = body.iter().flat_map(|m| (0..9).map(move |k| m[(k / 3, k % 3)])).collect();
-        let g = Tensor::from_vec(g, (1, JOINTS, 3, 3), self.vae.device())?.to_dtype(r.dtype())?;
-        let surrogate = (&r * &g)?.sum_all()?;
-        let grads = surrogate.backward()?;
-        let dz = grads.get(zv.as_tensor()).ok_or_else(|| candle_core::Error::Msg("no gradient for the latent".into()))?;
-        Ok(dz.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
+        if z.len() != LATENT || z.iter().any(|x| !x.is_finite()) {
+            return Err(candle_core::Error::Msg(format!("the latent must hold {LATENT} finite values, got {}", z.len())).into());
+        }
+        // Forward in f64, keeping the pre-activations.
+        let [(w1, b1), (w2, b2), (w3, b3)] = &self.decoder;
+        let silu = |a: &DVector<f64>| a.map(|x| x / (1.0 + (-x).exp()));
+        let a1 = w1 * DVector::from_column_slice(z) + b1;
+        let a2 = w2 * silu(&a1) + b2;
+        let six = w3 * silu(&a2) + b3;
+        // Back through Gram–Schmidt, then the layers; silu'(x) = s (1 + x (1 − s)).
+        let mut g_six = DVector::zeros(six.len());
+        for (j, g) in body.iter().enumerate() {
+            let x = Vector6::from_column_slice(&six.as_slice()[6 * j..6 * j + 6]);
+            g_six.rows_mut(6 * j, 6).copy_from(&sixd_to_matrix_vjp(&x, g));
+        }
+        let dsilu = |a: &DVector<f64>, g: DVector<f64>| {
+            g.zip_map(a, |g, x| {
+                let s = 1.0 / (1.0 + (-x).exp());
+                g * s * (1.0 + x * (1.0 - s))
+            })
+        };
+        let g_a2 = dsilu(&a2, w3.tr_mul(&g_six));
+        let g_a1 = dsilu(&a1, w2.tr_mul(&g_a2));
+        Ok(w1.tr_mul(&g_a1).as_slice().to_vec())
     }
 
     /// The encoder mean for a pose given as 36 rotation vectors (root ignored).

@@ -111,7 +111,7 @@ pub fn train(model: &BodyModel, cfg: &TrainConfig, mut progress: impl FnMut(usiz
     let train_s = t0.elapsed().as_secs_f64();
 
     // Figures.
-    let prior = PosePrior::new(PoseVae::from_tensors(vae.vars_map()?, DType::F32)?);
+    let prior = PosePrior::new(PoseVae::from_tensors(vae.vars_map()?, DType::F32)?)?;
     let mut err_sum = 0.0;
     for p in &held {
         let z = prior.encode(p)?;

@@ -52,6 +52,9 @@ const LAYERS: [(&str, usize, usize); 6] = [
 pub struct PoseVae {
     vars: HashMap<String, Var>,
     device: Device,
+    /// Weights enter graphs detached: a backward then yields input gradients only (inference;
+    /// the weight gradients of the 512×512 layers were most of a stage-2 step).
+    frozen: bool,
 }
 
 impl PoseVae {
@@ -65,7 +68,7 @@ impl PoseVae {
             vars.insert(format!("{name}.weight"), Var::from_tensor(&Tensor::from_vec(w, (fan_out, fan_in), &device)?)?);
             vars.insert(format!("{name}.bias"), Var::from_tensor(&Tensor::zeros(fan_out, DType::F32, &device)?)?);
         }
-        Ok(Self { vars, device })
+        Ok(Self { vars, device, frozen: false })
     }
 
     /// Loads weights (safetensors), checking every tensor's shape; `dtype` F32 or F64.
@@ -90,7 +93,7 @@ impl PoseVae {
                 vars.insert(key, Var::from_tensor(&t.to_dtype(dtype)?)?);
             }
         }
-        Ok(Self { vars, device })
+        Ok(Self { vars, device, frozen: false })
     }
 
     /// Writes the weights (f32 safetensors).
@@ -126,7 +129,23 @@ impl PoseVae {
     fn layer(&self, name: &str, x: &Tensor) -> Result<Tensor, candle_core::Error> {
         let w = self.vars[&format!("{name}.weight")].as_tensor();
         let b = self.vars[&format!("{name}.bias")].as_tensor();
-        x.matmul(&w.t()?)?.broadcast_add(b)
+        if self.frozen {
+            x.matmul(&w.detach().t()?)?.broadcast_add(&b.detach())
+        } else {
+            x.matmul(&w.t()?)?.broadcast_add(b)
+        }
+    }
+
+    /// The weight `(out, in)` and bias `(out)` of a layer (`enc1` … `dec3`).
+    pub fn layer_weights(&self, name: &str) -> Result<(Tensor, Tensor), candle_core::Error> {
+        let get = |k: String| self.vars.get(&k).map(|v| v.as_tensor().detach()).ok_or_else(|| candle_core::Error::Msg(format!("no layer `{name}`")));
+        Ok((get(format!("{name}.weight"))?, get(format!("{name}.bias"))?))
+    }
+
+    /// The same network for inference: weights no longer tracked by autodiff.
+    pub fn frozen(mut self) -> Self {
+        self.frozen = true;
+        self
     }
 
     /// Encoder: `(B, 210)` 6-D poses → `(μ, log σ²)`, each `(B, 32)`.
