@@ -121,6 +121,35 @@ impl<T: Real> Bvh<T> {
     }
 }
 
+impl<T: Real> Bvh<T> {
+    /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
+    /// larger): a nearest-element search prunes the boxes beyond its best distance so far.
+    pub fn for_each_near_ray_shrinking(&self, o: &Vector3<T>, inv_r: &Vector3<T>, mut radius: T, mut visit: impl FnMut(u32) -> T) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = [0u32; STACK];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let n = &self.nodes[stack[top] as usize];
+            if !slab_hit(&(n.lo.add_scalar(-radius)), &(n.hi.add_scalar(radius)), o, inv_r) {
+                continue;
+            }
+            if n.count > 0 {
+                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
+                    radius = visit(t).min(radius);
+                }
+            } else {
+                debug_assert!(top + 2 <= STACK);
+                stack[top] = n.right;
+                stack[top + 1] = n.first;
+                top += 2;
+            }
+        }
+    }
+}
+
 /// Does the half-line `o + s r`, `s ≥ 0`, meet the box `[lo, hi]`?
 #[inline]
 fn slab_hit<T: Real>(lo: &Vector3<T>, hi: &Vector3<T>, o: &Vector3<T>, inv_r: &Vector3<T>) -> bool {

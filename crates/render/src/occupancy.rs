@@ -132,6 +132,9 @@ pub struct SoftRenderer<T: Real> {
     tri_edges: Vec<[u32; 3]>,
 }
 
+/// Exposure tests per hitting ray, nearest contour edges first (module docs).
+const MAX_EXPOSURE_TESTS: usize = 16;
+
 /// No face (a boundary edge's second side).
 const NO_FACE: u32 = u32::MAX;
 
@@ -301,22 +304,39 @@ impl<T: Real> SoftRenderer<T> {
     fn silhouette_ray(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, near: &mut Vec<u32>, cand: &mut Vec<(T, T, T, u32)>) -> (T, Option<Nearest<T>>, u32) {
         let inv_sigma = T::of(1.0 / p.sigma_m2);
         let cull = T::of(p.cull_d2());
-        near.clear();
-        self.for_each_near(o, r, cull.sqrt(), culling, |t| near.push(t));
-        let visited = near.len() as u32;
-        let hit = near.iter().any(|&t| ray_triangle(o, r, &self.tri(t)).is_some());
-        if !hit {
-            // The nearest point of the mesh to a missing ray is on its silhouette.
+        let mut visited = 0u32;
+        if !self.hits(o, r, culling) {
+            // The nearest point of the mesh to a missing ray is on its silhouette: a nearest
+            // search whose radius shrinks to the best distance so far.
             let mut best: Option<Nearest<T>> = None;
-            for &t in near.iter() {
-                let pd = ray_triangle_distance(o, r, &self.tri(t));
-                if pd.d2 <= cull && best.is_none_or(|b| pd.d2 < b.pair.d2) {
-                    best = Some(Nearest { vertices: self.triangles[t as usize], pair: pd });
+            let mut consider = |t: u32| {
+                visited += 1;
+                let (c, rho) = self.spheres[t as usize];
+                let s = (c - o).dot(r).max(T::zero());
+                let bound = ((o + r * s - c).norm() - rho).max(T::zero());
+                let best_d2 = best.map_or(cull, |b| b.pair.d2);
+                if bound * bound > best_d2 {
+                    return best_d2.sqrt();
                 }
+                let pd = ray_triangle_distance(o, r, &self.tri(t));
+                if pd.d2 <= best_d2 {
+                    best = Some(Nearest { vertices: self.triangles[t as usize], pair: pd });
+                    return pd.d2.sqrt();
+                }
+                best_d2.sqrt()
+            };
+            match culling {
+                Culling::Dense => (0..self.triangles.len() as u32).for_each(|t| {
+                    consider(t);
+                }),
+                Culling::Bvh => self.bvh.for_each_near_ray_shrinking(o, &inverse_dir(r), cull.sqrt(), consider),
             }
             let x = best.map_or(-cull * inv_sigma, |b| -b.pair.d2 * inv_sigma);
             return (x, best, visited);
         }
+        near.clear();
+        self.for_each_near(o, r, cull.sqrt(), culling, |t| near.push(t));
+        visited = near.len() as u32;
         // Contour edges near the ray, nearest first; the first exposed one is the silhouette.
         cand.clear();
         for &t in near.iter() {
@@ -340,7 +360,8 @@ impl<T: Real> SoftRenderer<T> {
         cand.sort_unstable_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
         // Just past an edge: 1 % of σ^½ beyond it.
         let past = T::of(0.01 * p.sigma_m2.sqrt());
-        for &(d2, u, s, e) in cand.iter() {
+        // Deep inside, every nearby contour is hidden: after a few, call the ray saturated.
+        for &(d2, u, s, e) in cand.iter().take(MAX_EXPOSURE_TESTS) {
             let [ia, ib] = self.edges[e as usize].v;
             let (a, b) = (self.vertices[ia as usize], self.vertices[ib as usize]);
             let w = a + (b - a) * u - (o + r * s);
