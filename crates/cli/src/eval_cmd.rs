@@ -31,7 +31,7 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Set {
-    /// 4 captures per object type (12), ≈ 10 minutes on 2 cores.
+    /// 4 captures per object type (12), ≈ 6 minutes on 2 cores.
     Quick,
     /// 60 captures per object type (180), NETD varied.
     Full,

@@ -128,7 +128,7 @@ enum Command {
     /// Writes table.md (metric × object type; means ± 95 % intervals), results.json (per
     /// capture), report.html (with thumbnails) and run.toml.
     Eval {
-        /// Benchmark set: quick (12 captures, ≈ 10 min on 2 cores) or full (180).
+        /// Benchmark set: quick (12 captures, ≈ 6 min on 2 cores) or full (180).
         #[arg(long, value_enum, default_value = "quick")]
         preset: eval_cmd::Set,
         /// Output report directory.
