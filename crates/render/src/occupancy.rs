@@ -28,7 +28,10 @@
 //! *exposed* contour edge — an edge between a face turned towards the ray and one turned away (or
 //! a boundary edge) such that the ray moved just past it misses the mesh (a contour behind
 //! another part of the body is not the silhouette). `I` is 0.5 exactly on the silhouette and
-//! saturates inside; its gradient reaches the one triangle or edge that sets `d`.
+//! saturates inside; its gradient reaches the one triangle or edge that sets `d`. A miss's
+//! nearest triangle is found by a BVH search whose radius shrinks to the best distance so far;
+//! a hit tests at most `MAX_EXPOSURE_TESTS` contour edges, nearest first, and counts as
+//! saturated beyond them (deep inside, every nearby contour is hidden).
 //!
 //! **Autodiff.** These gradients are hand-written; an autodiff graph (the pose prior's decoder)
 //! takes them through the surrogate `L̃ = Σ V ⊙ stop_grad(∂L/∂V)`, whose gradient w.r.t. the
