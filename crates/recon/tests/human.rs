@@ -33,11 +33,16 @@ fn scene_with(seed: u64, is_car: bool, t: ThermalPreset) -> SceneFile {
 fn car_capture(seed: u64) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
     let sc = scene(seed, true);
     let sim = simulate(model(), &sc, seed).unwrap();
+    let rays = true_object_rays(&sc, &sim);
+    (sc, sim, rays)
+}
+
+/// The unoccluded reflected rays of the true objects.
+fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> ReflectedRays<f64> {
     let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc.objects.iter().zip(&sim.object_poses).map(|(o, p)| irmirror_render::sdf::PlacedSdf { sdf: o.shape.sdf(), depth_from_object: *p }).collect();
     let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
     let all = irmirror_render::reflect::reflect_camera(&sc.thermal_camera.intrinsics, &dft, &objs, &Default::default(), irmirror_render::reflect::Normals::Raw);
-    let rays = irmirror_recon::pipeline::unblocked(&all, &objs, &irmirror_recon::plane::Plane::camera_up(), &Default::default());
-    (sc, sim, rays)
+    irmirror_recon::pipeline::unblocked(&all, &objs, &irmirror_recon::plane::Plane::camera_up(), &Default::default())
 }
 
 /// The true root rotation (Anny → depth) and the body's up, depth frame.
@@ -152,11 +157,20 @@ fn representable_car_capture(seed: u64, t: ThermalPreset) -> (SceneFile, irmirro
         sc.person.rotvec_rad[j] = irmirror_geom::rotation::matrix_to_axis_angle(r).into();
     }
     let sim = simulate(model(), &sc, seed).unwrap();
-    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc.objects.iter().zip(&sim.object_poses).map(|(o, p)| irmirror_render::sdf::PlacedSdf { sdf: o.shape.sdf(), depth_from_object: *p }).collect();
-    let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
-    let all = irmirror_render::reflect::reflect_camera(&sc.thermal_camera.intrinsics, &dft, &objs, &Default::default(), irmirror_render::reflect::Normals::Raw);
-    let rays = irmirror_recon::pipeline::unblocked(&all, &objs, &irmirror_recon::plane::Plane::camera_up(), &Default::default());
+    let rays = true_object_rays(&sc, &sim);
     (sc, sim, rays)
+}
+
+/// The truth, then the truth moved 20 cm (three directions) and turned 20° about `up`.
+fn perturbed_starts(root: Vector3<f64>, r0: &nalgebra::Matrix3<f64>, up: &Vector3<f64>, z: &[f64]) -> Vec<irmirror_recon::human::HumanState> {
+    [Vector3::zeros(), Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.2), Vector3::new(-0.12, 0.12, 0.12)]
+        .iter()
+        .enumerate()
+        .map(|(k, dt)| {
+            let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
+            irmirror_recon::human::HumanState { translation: root + dt, rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0, latent: z.to_vec() }
+        })
+        .collect()
 }
 
 /// Issue 8's test: on a capture with a noiseless mask and a person the model can represent
@@ -174,9 +188,7 @@ fn stage2_returns_from_perturbed_starts() {
     let cfg = HumanConfig::default();
     let edge = edge_distance(&sim.reflection_mask);
     let mut errors = Vec::new();
-    for (k, dt) in [Vector3::zeros(), Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.2), Vector3::new(-0.12, 0.12, 0.12)].iter().enumerate() {
-        let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
-        let start = HumanState { translation: root + dt, rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0, latent: z.clone() };
+    for start in perturbed_starts(root, &r0, &up, &z) {
         let (end, _) = problem.run(&start, &cfg, &edge, 7).unwrap().expect("no divergence");
         errors.push((end.translation - root).norm());
     }
@@ -220,9 +232,7 @@ fn perturbed_starts_report() {
         let mask_px = sim.reflection_mask.data.iter().filter(|&&b| b).count();
         eprintln!("seed {seed}: person {:.2} m, {mask_px} mask px, truth loss {lt:.3} soft IoU {it:.3}", root.norm());
         let edge = edge_distance(&sim.reflection_mask);
-        for (k, dt) in [Vector3::zeros(), Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.2), Vector3::new(-0.12, 0.12, 0.12)].iter().enumerate() {
-            let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
-            let start = HumanState { translation: root + dt, rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0, latent: z.clone() };
+        for (k, start) in perturbed_starts(root, &r0, &up, &z).into_iter().enumerate() {
             let t0 = std::time::Instant::now();
             let (end, _) = problem.run(&start, &cfg, &edge, 7).unwrap().unwrap();
             let (l1, i1) = problem.full_loss(&end, &cfg).unwrap();

@@ -96,32 +96,12 @@ impl<T: Real> Bvh<T> {
     /// Calls `visit(triangle)` for every triangle whose box, inflated by `radius`, meets the
     /// half-line `o + s r`, `s ≥ 0`. `inv_r` is `1 / r` per component. No allocation.
     pub fn for_each_near_ray(&self, o: &Vector3<T>, inv_r: &Vector3<T>, radius: T, mut visit: impl FnMut(u32)) {
-        if self.nodes.is_empty() {
-            return;
-        }
-        let mut stack = [0u32; STACK];
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            let n = &self.nodes[stack[top] as usize];
-            if !slab_hit(&(n.lo.add_scalar(-radius)), &(n.hi.add_scalar(radius)), o, inv_r) {
-                continue;
-            }
-            if n.count > 0 {
-                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
-                    visit(t);
-                }
-            } else {
-                debug_assert!(top + 2 <= STACK);
-                stack[top] = n.right;
-                stack[top + 1] = n.first;
-                top += 2;
-            }
-        }
+        self.for_each_near_ray_shrinking(o, inv_r, radius, |t| {
+            visit(t);
+            radius
+        });
     }
-}
 
-impl<T: Real> Bvh<T> {
     /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
     /// larger): a nearest-element search prunes the boxes beyond its best distance so far.
     pub fn for_each_near_ray_shrinking(&self, o: &Vector3<T>, inv_r: &Vector3<T>, mut radius: T, mut visit: impl FnMut(u32) -> T) {

@@ -127,7 +127,7 @@ pub struct SoftRenderer<T: Real> {
     spheres: Vec<(Vector3<T>, T)>,
     /// Per ray-chunk sparse vertex-gradient contributions, reused across calls.
     contributions: Vec<Vec<(u32, Vector3<T>)>>,
-    /// Unit face normals (zero for degenerate faces), for contour edges.
+    /// Face normals, not normalised (only their signs against a ray matter: contour edges).
     normals: Vec<Vector3<T>>,
     /// Mesh edges: vertices and the (up to two) faces that share them.
     edges: Vec<Edge>,
@@ -233,7 +233,7 @@ impl<T: Real> SoftRenderer<T> {
             let m = (a + b + c) / T::of(3.0);
             let r2 = (a - m).norm_squared().max((b - m).norm_squared()).max((c - m).norm_squared());
             *s = (m, r2.sqrt());
-            *n = (b - a).cross(&(c - a)).try_normalize(T::zero()).unwrap_or_else(Vector3::zeros);
+            *n = (b - a).cross(&(c - a));
         });
     }
 
@@ -303,8 +303,8 @@ impl<T: Real> SoftRenderer<T> {
     }
 
     /// [`Aggregation::Silhouette`] for one ray: `(x, what sets it, triangles visited)`.
-    /// `near` and `cand` are scratch.
-    fn silhouette_ray(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, near: &mut Vec<u32>, cand: &mut Vec<(T, T, T, u32)>) -> (T, Option<Nearest<T>>, u32) {
+    /// `cand` is scratch.
+    fn silhouette_ray(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, cand: &mut Vec<(T, T, T, u32)>) -> (T, Option<Nearest<T>>, u32) {
         let inv_sigma = T::of(1.0 / p.sigma_m2);
         let cull = T::of(p.cull_d2());
         let mut visited = 0u32;
@@ -337,12 +337,10 @@ impl<T: Real> SoftRenderer<T> {
             let x = best.map_or(-cull * inv_sigma, |b| -b.pair.d2 * inv_sigma);
             return (x, best, visited);
         }
-        near.clear();
-        self.for_each_near(o, r, cull.sqrt(), culling, |t| near.push(t));
-        visited = near.len() as u32;
         // Contour edges near the ray, nearest first; the first exposed one is the silhouette.
         cand.clear();
-        for &t in near.iter() {
+        self.for_each_near(o, r, cull.sqrt(), culling, |t| {
+            visited += 1;
             for &e in &self.tri_edges[t as usize] {
                 let edge = self.edges[e as usize];
                 // Each edge once: from its first face (both faces are visited when it is near).
@@ -359,7 +357,7 @@ impl<T: Real> SoftRenderer<T> {
                     cand.push((d2, u, s, e));
                 }
             }
-        }
+        });
         cand.sort_unstable_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
         // Just past an edge: 1 % of σ^½ beyond it.
         let past = T::of(0.01 * p.sigma_m2.sqrt());
@@ -385,7 +383,7 @@ impl<T: Real> SoftRenderer<T> {
             let results: Vec<(T, Option<Nearest<T>>, u32)> = (0..rays.len())
                 .into_par_iter()
                 .with_min_len(4)
-                .map_init(|| (Vec::new(), Vec::new()), |(near, cand), i| self.silhouette_ray(&rays.origin[i], &rays.dir[i], params, culling, near, cand))
+                .map_init(Vec::new, |cand, i| self.silhouette_ray(&rays.origin[i], &rays.dir[i], params, culling, cand))
                 .collect();
             return Occupancy {
                 value: results.iter().map(|r| sigmoid(r.0)).collect(),

@@ -52,8 +52,8 @@ const LAYERS: [(&str, usize, usize); 6] = [
 pub struct PoseVae {
     vars: HashMap<String, Var>,
     device: Device,
-    /// Weights enter graphs detached: a backward then yields input gradients only (inference;
-    /// the weight gradients of the 512×512 layers were most of a stage-2 step).
+    /// Weights enter computations detached (inference): decoding a plain latent then records
+    /// no autodiff graph.
     frozen: bool,
 }
 
