@@ -120,6 +120,8 @@ fn benches_print_their_tables() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("| 0 | bowl |") && out.contains("| 0 | mug |") && out.contains("| mug | 1 |"), "{out}");
+    // Its mug shows three depth pixels of its handle: counted as seen, so its rotation is summarised.
+    assert!(out.contains(" (3 px) |") && !out.contains("handle hidden"), "{out}");
     let o = irmirror(&["bench", "objects", "--seeds", "0"]);
     assert!(!o.status.success() && stderr(&o).contains("--seeds"), "{}", stderr(&o));
 }

@@ -266,11 +266,11 @@ impl FittedObject {
     }
 
     /// The fitted surface as a mesh in the depth frame, `resolution` cells across the object
-    /// (a learned shape: batched network evaluation, its largest piece).
+    /// (a learned shape: batched network evaluation, pieces of ≥ 0.5 % of the largest one's volume).
     pub fn mesh(&self, resolution: usize) -> Result<TriMesh, ReconError> {
         let s = &self.depth_from_object;
         let mut m = match &self.learned {
-            Some(l) => irmirror_sdf::quality::extract_mesh(&l.net, &l.latent, resolution)?.largest_component(),
+            Some(l) => irmirror_sdf::quality::extract_mesh(&l.net, &l.latent, resolution)?.main_components(irmirror_sdf::quality::MAIN_PART_FRACTION),
             None => family_mesh(&self.shape, resolution),
         };
         m.map_vertices(|v| s.transform_point(&Vector3::from(v.map(f64::from))).map(|x| x as f32).into());
@@ -615,6 +615,10 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
         })
         .collect();
     let runs: Vec<(State, f64, Vec<f64>)> = inits.into_par_iter().map(|s| problem.run(s)).collect();
+    for (k, (st, loss, _)) in runs.iter().enumerate() {
+        let x = st.rotation * Vector3::x();
+        tracing::debug!("{family:?} restart {k}: loss {loss:.4e}, object +X {:.3} {:.3} {:.3}, scale {:.4} m", x.x, x.y, x.z, st.log_scale.exp());
+    }
     let (st, loss, curve) = runs.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)).expect("at least one restart");
     let shape = family.shape(&st.u);
     let sim = st.sim();
@@ -676,7 +680,7 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
     let observation = PlacedObservation { surface: &obs.surface, free: &obs.free, inside: &inside, support: &support, up: Some(plane.n()), unit_m: unit, scale_prior };
     let placed = fit_placed(&net, &observation, &init, &net.mean_latent(), &PlacedFitConfig { seed, ..cfg.learned })?;
     let field = Arc::new(net.shape(&placed.latent)?);
-    let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?.largest_component();
+    let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?.main_components(irmirror_sdf::quality::MAIN_PART_FRACTION);
     let base_y = mesh.vertices.iter().map(|v| f64::from(v[1])).fold(f64::INFINITY, f64::min);
     let d = placed.depth_from_object;
     let mean = obs.surface.iter().map(|p| (d.scale * field.value_grad(&d.inverse_transform_point(p)).0).abs()).sum::<f64>() / obs.surface.len() as f64;

@@ -242,3 +242,37 @@ fn builtin_priors_are_the_shipped_files() {
         assert_eq!(built_in.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3)).0, file.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3)).0);
     }
 }
+
+#[test]
+fn bbox_error_is_the_largest_face_offset() {
+    let (_, mesh) = procedural(Category::Mug, 1, 2, 1, 32).pop().unwrap();
+    assert_eq!(irmirror_sdf::quality::bbox_error(&mesh, &mesh), 0.0);
+    // Moving one vertex on the +x face out by 0.1 moves only that face.
+    let mut grown = mesh.clone();
+    let i = (0..grown.vertices.len()).max_by(|&a, &b| grown.vertices[a][0].total_cmp(&grown.vertices[b][0])).unwrap();
+    grown.vertices[i][0] += 0.1;
+    assert!((irmirror_sdf::quality::bbox_error(&grown, &mesh) - 0.1).abs() < 1e-6);
+    let mut shifted = mesh.clone();
+    shifted.vertices.iter_mut().for_each(|v| v[1] -= 0.03);
+    assert!((irmirror_sdf::quality::bbox_error(&mesh, &shifted) - 0.03).abs() < 1e-6);
+    assert!(irmirror_sdf::quality::bbox_error(&mesh, &irmirror_geom::TriMesh::default()).is_infinite());
+}
+
+/// Held-out figures of a shipped (or `WEIGHTS=path`) prior: `CATEGORY=mug N=8 cargo test --release
+/// -p irmirror-sdf --test prior held_out_report -- --ignored --nocapture`.
+#[test]
+#[ignore = "a report (minutes), not a check"]
+fn held_out_report() {
+    let cat = match std::env::var("CATEGORY").as_deref() {
+        Ok("bowl") => Category::Bowl,
+        Ok("car") => Category::Car,
+        _ => Category::Mug,
+    };
+    let net = match std::env::var("WEIGHTS") {
+        Ok(p) => Arc::new(SdfNet::load(std::path::Path::new(&p)).unwrap()),
+        Err(_) => SdfNet::builtin(cat).unwrap(),
+    };
+    let n = std::env::var("N").ok().and_then(|s| s.parse().ok()).unwrap_or(8);
+    let figs = irmirror_sdf::quality::held_out(&net, n, 8000, 0, &InferConfig::default(), |_| {}).unwrap();
+    println!("{}", serde_json::to_string_pretty(&figs).unwrap());
+}
