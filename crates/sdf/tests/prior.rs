@@ -263,11 +263,7 @@ fn bbox_error_is_the_largest_face_offset() {
 #[test]
 #[ignore = "a report (minutes), not a check"]
 fn held_out_report() {
-    let cat = match std::env::var("CATEGORY").as_deref() {
-        Ok("bowl") => Category::Bowl,
-        Ok("car") => Category::Car,
-        _ => Category::Mug,
-    };
+    let cat = Category::parse(&std::env::var("CATEGORY").unwrap_or_else(|_| "mug".into())).unwrap();
     let net = match std::env::var("WEIGHTS") {
         Ok(p) => Arc::new(SdfNet::load(std::path::Path::new(&p)).unwrap()),
         Err(_) => SdfNet::builtin(cat).unwrap(),
