@@ -48,7 +48,11 @@ pub struct CaseErrors {
 impl CaseErrors {
     /// The largest of the metric errors.
     pub fn max_m(&self) -> f64 {
-        self.rest_joints_m.max(self.rest_height_m).max(self.posed_joints_m).max(self.posed_vertices_m).max(self.keypoints_m)
+        self.rest_joints_m
+            .max(self.rest_height_m)
+            .max(self.posed_joints_m)
+            .max(self.posed_vertices_m)
+            .max(self.keypoints_m)
     }
 }
 
@@ -63,44 +67,75 @@ pub enum CaseOutcome {
 
 /// Checks every case; fails only on unreadable vectors or a rig mismatch.
 pub fn check_vectors(model: &BodyModel, path: &Path) -> Result<Vec<CaseOutcome>, BodyError> {
-    let bad = |r: String| BodyError::Vectors { path: path.into(), reason: r };
-    let text = std::fs::read_to_string(path).map_err(|e| BodyError::Io { path: path.into(), source: e })?;
+    let bad = |r: String| BodyError::Vectors {
+        path: path.into(),
+        reason: r,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| BodyError::Io {
+        path: path.into(),
+        source: e,
+    })?;
     let file: VectorsFile = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
     if file.bone_names != model.asset.meta.bone_names || file.parents != model.asset.parents {
-        return Err(bad("bone names or parents differ from the asset's rig".into()));
+        return Err(bad(
+            "bone names or parents differ from the asset's rig".into()
+        ));
     }
     let mut out = Vec::new();
     for (i, case) in file.cases.iter().enumerate() {
         // Anny's defaults are 0.5 for every phenotype value.
         let get = |k: &str| case.phenotype.get(k).copied().unwrap_or(0.5);
-        let ph = Phenotype::from_values(["gender", "age", "muscle", "weight", "height", "proportions"].map(get));
+        let ph = Phenotype::from_values(
+            ["gender", "age", "muscle", "weight", "height", "proportions"].map(get),
+        );
         if let Err(e) = ph.validate(&model.asset) {
             out.push(CaseOutcome::Skipped(e.to_string()));
             continue;
         }
         let j = model.n_joints();
-        if case.rotvec.len() != j || case.rest_joint_heads.len() != j || case.vertex_indices.len() != case.posed_vertices.len() {
+        if case.rotvec.len() != j
+            || case.rest_joint_heads.len() != j
+            || case.vertex_indices.len() != case.posed_vertices.len()
+        {
             return Err(bad(format!("case {i}: array lengths do not match the rig")));
         }
         let shaped = model.shaped_phenotype::<f64>(&ph)?;
         let pose = Pose::from_axis_angles(&case.rotvec, Vector3::from(case.translation));
         let posed = model.pose(&shaped, &pose)?;
         let maxdist = |a: &[Vector3<f64>], b: &[[f64; 3]]| {
-            a.iter().zip(b).map(|(p, q)| (p - Vector3::from(*q)).norm()).fold(0.0, f64::max)
+            a.iter()
+                .zip(b)
+                .map(|(p, q)| (p - Vector3::from(*q)).norm())
+                .fold(0.0, f64::max)
         };
         let frames = model.rest_frames(&shaped);
-        let (zmin, zmax) = shaped.vertices.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v.z), hi.max(v.z)));
+        let (zmin, zmax) = shaped
+            .vertices
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(lo, hi), v| {
+                (lo.min(v.z), hi.max(v.z))
+            });
         let sample: Vec<Vector3<f64>> = case
             .vertex_indices
             .iter()
-            .map(|&v| posed.vertices.get(v).copied().ok_or_else(|| bad(format!("case {i}: vertex {v} out of range"))))
+            .map(|&v| {
+                posed
+                    .vertices
+                    .get(v)
+                    .copied()
+                    .ok_or_else(|| bad(format!("case {i}: vertex {v} out of range")))
+            })
             .collect::<Result<_, _>>()?;
         out.push(CaseOutcome::Checked(CaseErrors {
             rest_joints_m: maxdist(&shaped.joint_heads, &case.rest_joint_heads),
             rest_frames: frames
                 .iter()
                 .zip(&case.rest_frames)
-                .map(|(r, q)| (0..9).map(|k| (r[(k / 3, k % 3)] - q[k / 3][k % 3]).abs()).fold(0.0, f64::max))
+                .map(|(r, q)| {
+                    (0..9)
+                        .map(|k| (r[(k / 3, k % 3)] - q[k / 3][k % 3]).abs())
+                        .fold(0.0, f64::max)
+                })
                 .fold(0.0, f64::max),
             rest_height_m: ((zmax - zmin) - case.rest_height).abs(),
             posed_joints_m: maxdist(&posed.joints, &case.posed_joint_positions),

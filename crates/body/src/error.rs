@@ -50,10 +50,16 @@ pub enum BodyError {
 impl BodyError {
     /// A parameter error.
     pub fn param(field: impl Into<String>, reason: impl Into<String>) -> Self {
-        Self::Param { field: field.into(), reason: reason.into() }
+        Self::Param {
+            field: field.into(),
+            reason: reason.into(),
+        }
     }
     /// An asset error.
     pub fn asset(origin: impl Into<String>, reason: impl Into<String>) -> Self {
-        Self::Asset { origin: origin.into(), reason: reason.into() }
+        Self::Asset {
+            origin: origin.into(),
+            reason: reason.into(),
+        }
     }
 }

@@ -26,7 +26,12 @@ pub fn forward<T: Real>(
 }
 
 /// Skinning transforms `(A_c, b_c)` from the FK result; `A_c = G_c`, so only `b` is written.
-pub fn skinning_offsets<T: Real>(heads: &[Vector3<T>], g: &[Matrix3<T>], t: &[Vector3<T>], b: &mut [Vector3<T>]) {
+pub fn skinning_offsets<T: Real>(
+    heads: &[Vector3<T>],
+    g: &[Matrix3<T>],
+    t: &[Vector3<T>],
+    b: &mut [Vector3<T>],
+) {
     for c in 0..heads.len() {
         b[c] = t[c] - g[c] * heads[c];
     }

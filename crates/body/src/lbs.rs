@@ -20,7 +20,9 @@ impl<T: Real> LbsScratch<T> {
     /// Scratch for `n_vertices` vertices and `n_joints` joints.
     pub fn new(n_vertices: usize, n_joints: usize) -> Self {
         let n = n_vertices.div_ceil(CHUNK);
-        Self { chunks: vec![vec![(Matrix3::zeros(), Vector3::zeros()); n_joints]; n] }
+        Self {
+            chunks: vec![vec![(Matrix3::zeros(), Vector3::zeros()); n_joints]; n],
+        }
     }
 }
 
@@ -34,23 +36,25 @@ pub fn forward<T: Real>(
     b: &[Vector3<T>],
     out: &mut [Vector3<T>],
 ) {
-    out.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, chunk)| {
-        let base = ci * CHUNK;
-        for (o, v) in chunk.iter_mut().enumerate() {
-            let i = base + o;
-            let p = rest[i];
-            let mut acc = Vector3::zeros();
-            for s in 0..k {
-                let w = weights[i * k + s];
-                if w == 0.0 {
-                    continue;
+    out.par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(ci, chunk)| {
+            let base = ci * CHUNK;
+            for (o, v) in chunk.iter_mut().enumerate() {
+                let i = base + o;
+                let p = rest[i];
+                let mut acc = Vector3::zeros();
+                for s in 0..k {
+                    let w = weights[i * k + s];
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let j = indices[i * k + s] as usize;
+                    acc += (a[j] * p + b[j]) * T::of(w);
                 }
-                let j = indices[i * k + s] as usize;
-                acc += (a[j] * p + b[j]) * T::of(w);
+                *v = acc;
             }
-            *v = acc;
-        }
-    });
+        });
 }
 
 /// VJP of [`forward`]: from `d_out` writes `∂L/∂A` (`d_a`), `∂L/∂b` (`d_b`) and
@@ -72,7 +76,8 @@ pub fn forward_vjp<T: Real>(
         .zip(scratch.chunks.par_iter_mut())
         .enumerate()
         .for_each(|(ci, (d_rest_chunk, acc))| {
-            acc.iter_mut().for_each(|e| *e = (Matrix3::zeros(), Vector3::zeros()));
+            acc.iter_mut()
+                .for_each(|e| *e = (Matrix3::zeros(), Vector3::zeros()));
             let base = ci * CHUNK;
             for (o, dr) in d_rest_chunk.iter_mut().enumerate() {
                 let i = base + o;

@@ -44,12 +44,21 @@ pub struct Pose<T: Real> {
 impl<T: Real> Pose<T> {
     /// Identity rotations, root at the origin.
     pub fn identity(n_joints: usize) -> Self {
-        Self { rotations: vec![Matrix3::identity(); n_joints], translation: Vector3::zeros() }
+        Self {
+            rotations: vec![Matrix3::identity(); n_joints],
+            translation: Vector3::zeros(),
+        }
     }
 
     /// From rotation vectors (axis · angle, radians), one per bone.
     pub fn from_axis_angles(rotvecs: &[[T; 3]], translation: Vector3<T>) -> Self {
-        Self { rotations: rotvecs.iter().map(|w| axis_angle_to_matrix(&Vector3::from(*w))).collect(), translation }
+        Self {
+            rotations: rotvecs
+                .iter()
+                .map(|w| axis_angle_to_matrix(&Vector3::from(*w)))
+                .collect(),
+            translation,
+        }
     }
 
     /// Checks the length against the model and that every value is finite.
@@ -57,10 +66,19 @@ impl<T: Real> Pose<T> {
         if self.rotations.len() != n_joints {
             return Err(BodyError::param(
                 "pose.rotations",
-                format!("{} rotations given, the body has {n_joints} joints", self.rotations.len()),
+                format!(
+                    "{} rotations given, the body has {n_joints} joints",
+                    self.rotations.len()
+                ),
             ));
         }
-        if self.rotations.iter().flat_map(|r| r.iter()).chain(self.translation.iter()).any(|x| !x.is_finite()) {
+        if self
+            .rotations
+            .iter()
+            .flat_map(|r| r.iter())
+            .chain(self.translation.iter())
+            .any(|x| !x.is_finite())
+        {
             return Err(BodyError::param("pose", "non-finite value"));
         }
         Ok(())
@@ -103,7 +121,11 @@ pub struct BodyGrad<T: Real> {
 impl<T: Real> BodyGrad<T> {
     /// Gradients w.r.t. rotation vectors `w_c` (the pose given by [`Pose::from_axis_angles`]).
     pub fn axis_angle(&self, rotvecs: &[[T; 3]]) -> Vec<[T; 3]> {
-        rotvecs.iter().zip(&self.rotations).map(|(w, g)| axis_angle_to_matrix_vjp(&Vector3::from(*w), g).into()).collect()
+        rotvecs
+            .iter()
+            .zip(&self.rotations)
+            .map(|(w, g)| axis_angle_to_matrix_vjp(&Vector3::from(*w), g).into())
+            .collect()
     }
 }
 
@@ -131,9 +153,17 @@ impl BodyModel {
         for (&kp, &w) in asset.coco_kp_index.iter().zip(&asset.coco_weight) {
             sums[kp as usize] += f64::from(w);
         }
-        let keypoint_weights =
-            asset.coco_kp_index.iter().zip(&asset.coco_weight).map(|(&kp, &w)| f64::from(w) / sums[kp as usize]).collect();
-        Self { asset, skin_weights, keypoint_weights }
+        let keypoint_weights = asset
+            .coco_kp_index
+            .iter()
+            .zip(&asset.coco_weight)
+            .map(|(&kp, &w)| f64::from(w) / sums[kp as usize])
+            .collect();
+        Self {
+            asset,
+            skin_weights,
+            keypoint_weights,
+        }
     }
 
     /// The model of the asset compiled into the binary.
@@ -162,7 +192,12 @@ impl BodyModel {
     pub fn shape_coefficients(&self, phenotype: &Phenotype) -> Result<Vec<f64>, BodyError> {
         let c = phenotype.coefficients(&self.asset)?;
         let r = self.rank();
-        let mut z: Vec<f64> = self.asset.shape_offset.iter().map(|&o| -f64::from(o)).collect();
+        let mut z: Vec<f64> = self
+            .asset
+            .shape_offset
+            .iter()
+            .map(|&o| -f64::from(o))
+            .collect();
         for (b, cb) in c.iter().enumerate().filter(|(_, cb)| **cb != 0.0) {
             for i in 0..r {
                 z[i] += cb * f64::from(self.asset.shape_projection[b * r + i]);
@@ -174,19 +209,38 @@ impl BodyModel {
     /// The rest body for shape coefficients `z`.
     pub fn shaped<T: Real>(&self, z: &[T]) -> Result<ShapedBody<T>, BodyError> {
         if z.len() != self.rank() {
-            return Err(BodyError::param("shape", format!("{} coefficients given, the asset has rank {}", z.len(), self.rank())));
+            return Err(BodyError::param(
+                "shape",
+                format!(
+                    "{} coefficients given, the asset has rank {}",
+                    z.len(),
+                    self.rank()
+                ),
+            ));
         }
         if z.iter().any(|x| !x.is_finite()) {
             return Err(BodyError::param("shape", "non-finite coefficient"));
         }
-        let mut out = ShapedBody { z: vec![], vertices: vec![], joint_heads: vec![], joint_tails: vec![] };
+        let mut out = ShapedBody {
+            z: vec![],
+            vertices: vec![],
+            joint_heads: vec![],
+            joint_tails: vec![],
+        };
         shape::shape_into(&self.asset, z, &mut out);
         Ok(out)
     }
 
     /// The rest body of a phenotype.
-    pub fn shaped_phenotype<T: Real>(&self, phenotype: &Phenotype) -> Result<ShapedBody<T>, BodyError> {
-        let z: Vec<T> = self.shape_coefficients(phenotype)?.into_iter().map(T::of).collect();
+    pub fn shaped_phenotype<T: Real>(
+        &self,
+        phenotype: &Phenotype,
+    ) -> Result<ShapedBody<T>, BodyError> {
+        let z: Vec<T> = self
+            .shape_coefficients(phenotype)?
+            .into_iter()
+            .map(T::of)
+            .collect();
         self.shaped(&z)
     }
 
@@ -202,7 +256,11 @@ impl BodyModel {
                 let axis = y.cross(&Vector3::y());
                 let (s, cos) = (axis.norm(), y.dot(&Vector3::y()));
                 let a = if s.to_f64() < 1e-12 {
-                    if cos > T::zero() { Matrix3::identity() } else { Matrix3::from_diagonal(&Vector3::new(T::one(), -T::one(), -T::one())) }
+                    if cos > T::zero() {
+                        Matrix3::identity()
+                    } else {
+                        Matrix3::from_diagonal(&Vector3::new(T::one(), -T::one(), -T::one()))
+                    }
                 } else {
                     axis_angle_to_matrix(&(axis * (-s.atan2(cos) / s)))
                 };
@@ -231,18 +289,53 @@ impl BodyModel {
     }
 
     /// Poses `shaped` into `out` (no allocation).
-    pub fn pose_into<T: Real>(&self, shaped: &ShapedBody<T>, pose: &Pose<T>, out: &mut PosedBody<T>) -> Result<(), BodyError> {
+    pub fn pose_into<T: Real>(
+        &self,
+        shaped: &ShapedBody<T>,
+        pose: &Pose<T>,
+        out: &mut PosedBody<T>,
+    ) -> Result<(), BodyError> {
         pose.validate(self.n_joints())?;
         let a = &self.asset;
-        fk::forward(&a.parents, &shaped.joint_heads, &pose.rotations, &pose.translation, &mut out.world_rotations, &mut out.joints);
-        fk::skinning_offsets(&shaped.joint_heads, &out.world_rotations, &out.joints, &mut out.skin_offsets);
-        lbs::forward(&shaped.vertices, &a.skin_indices, &self.skin_weights, a.influences, &out.world_rotations, &out.skin_offsets, &mut out.vertices);
-        keypoints::regress(&a.coco_kp_index, &a.coco_vertex_index, &self.keypoint_weights, &out.vertices, &mut out.keypoints);
+        fk::forward(
+            &a.parents,
+            &shaped.joint_heads,
+            &pose.rotations,
+            &pose.translation,
+            &mut out.world_rotations,
+            &mut out.joints,
+        );
+        fk::skinning_offsets(
+            &shaped.joint_heads,
+            &out.world_rotations,
+            &out.joints,
+            &mut out.skin_offsets,
+        );
+        lbs::forward(
+            &shaped.vertices,
+            &a.skin_indices,
+            &self.skin_weights,
+            a.influences,
+            &out.world_rotations,
+            &out.skin_offsets,
+            &mut out.vertices,
+        );
+        keypoints::regress(
+            &a.coco_kp_index,
+            &a.coco_vertex_index,
+            &self.keypoint_weights,
+            &out.vertices,
+            &mut out.keypoints,
+        );
         Ok(())
     }
 
     /// Poses `shaped`, allocating the outputs.
-    pub fn pose<T: Real>(&self, shaped: &ShapedBody<T>, pose: &Pose<T>) -> Result<PosedBody<T>, BodyError> {
+    pub fn pose<T: Real>(
+        &self,
+        shaped: &ShapedBody<T>,
+        pose: &Pose<T>,
+    ) -> Result<PosedBody<T>, BodyError> {
         let mut out = self.posed_buffers();
         self.pose_into(shaped, pose, &mut out)?;
         Ok(out)
@@ -265,14 +358,31 @@ impl BodyModel {
         out.shape.resize(r, T::zero());
         match grads.vertices {
             Some(d) => posed.d_vertices.copy_from_slice(d),
-            None => posed.d_vertices.iter_mut().for_each(|x| *x = Vector3::zeros()),
+            None => posed
+                .d_vertices
+                .iter_mut()
+                .for_each(|x| *x = Vector3::zeros()),
         }
         if let Some(dk) = grads.keypoints {
-            keypoints::regress_vjp(&a.coco_kp_index, &a.coco_vertex_index, &self.keypoint_weights, dk, &mut posed.d_vertices);
+            keypoints::regress_vjp(
+                &a.coco_kp_index,
+                &a.coco_vertex_index,
+                &self.keypoint_weights,
+                dk,
+                &mut posed.d_vertices,
+            );
         }
         lbs::forward_vjp(
-            &shaped.vertices, &a.skin_indices, &self.skin_weights, a.influences, &posed.world_rotations,
-            &posed.d_vertices, &mut posed.d_a, &mut posed.d_b, &mut posed.d_rest, &mut posed.lbs,
+            &shaped.vertices,
+            &a.skin_indices,
+            &self.skin_weights,
+            a.influences,
+            &posed.world_rotations,
+            &posed.d_vertices,
+            &mut posed.d_a,
+            &mut posed.d_b,
+            &mut posed.d_rest,
+            &mut posed.lbs,
         );
         match grads.joints {
             Some(d) => posed.d_t.copy_from_slice(d),
@@ -280,10 +390,23 @@ impl BodyModel {
         }
         posed.d_heads.iter_mut().for_each(|x| *x = Vector3::zeros());
         // d_a now holds ∂L/∂G (A = G); fold in the offsets b = t − G h.
-        fk::skinning_offsets_vjp(&shaped.joint_heads, &posed.world_rotations, &posed.d_b, &mut posed.d_a, &mut posed.d_t, &mut posed.d_heads);
+        fk::skinning_offsets_vjp(
+            &shaped.joint_heads,
+            &posed.world_rotations,
+            &posed.d_b,
+            &mut posed.d_a,
+            &mut posed.d_t,
+            &mut posed.d_heads,
+        );
         out.translation = fk::forward_vjp(
-            &a.parents, &shaped.joint_heads, &pose.rotations, &posed.world_rotations,
-            &mut posed.d_a, &mut posed.d_t, &mut out.rotations, &mut posed.d_heads,
+            &a.parents,
+            &shaped.joint_heads,
+            &pose.rotations,
+            &posed.world_rotations,
+            &mut posed.d_a,
+            &mut posed.d_t,
+            &mut out.rotations,
+            &mut posed.d_heads,
         );
         shape::shape_vjp(a, &posed.d_rest, &posed.d_heads, &mut out.shape);
     }
@@ -291,7 +414,17 @@ impl BodyModel {
     /// The posed mesh as an `f32` triangle mesh (frame of the pose's translation).
     pub fn mesh<T: Real>(&self, posed: &PosedBody<T>) -> TriMesh {
         TriMesh {
-            vertices: posed.vertices.iter().map(|v| [v.x.to_f64() as f32, v.y.to_f64() as f32, v.z.to_f64() as f32]).collect(),
+            vertices: posed
+                .vertices
+                .iter()
+                .map(|v| {
+                    [
+                        v.x.to_f64() as f32,
+                        v.y.to_f64() as f32,
+                        v.z.to_f64() as f32,
+                    ]
+                })
+                .collect(),
             triangles: self.asset.faces.clone(),
         }
     }

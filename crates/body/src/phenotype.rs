@@ -16,7 +16,15 @@ use crate::{BodyAsset, BodyError};
 use serde::{Deserialize, Serialize};
 
 /// Names of the shape variables, in factor-table order.
-pub const VARIABLES: [&str; 7] = ["gender", "age", "muscle", "weight", "height", "proportions", "race"];
+pub const VARIABLES: [&str; 7] = [
+    "gender",
+    "age",
+    "muscle",
+    "weight",
+    "height",
+    "proportions",
+    "race",
+];
 
 /// Anny's phenotype parameters, each in [0, 1].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -39,19 +47,40 @@ pub struct Phenotype {
 impl Default for Phenotype {
     /// A mid-aged (≈ 40 y), androgynous adult of average build and ≈ 1.7 m.
     fn default() -> Self {
-        Self { gender: 0.5, age: 0.8, muscle: 0.5, weight: 0.5, height: 0.37, proportions: 0.5 }
+        Self {
+            gender: 0.5,
+            age: 0.8,
+            muscle: 0.5,
+            weight: 0.5,
+            height: 0.37,
+            proportions: 0.5,
+        }
     }
 }
 
 impl Phenotype {
     /// The six values in factor-table order.
     pub fn values(&self) -> [f64; 6] {
-        [self.gender, self.age, self.muscle, self.weight, self.height, self.proportions]
+        [
+            self.gender,
+            self.age,
+            self.muscle,
+            self.weight,
+            self.height,
+            self.proportions,
+        ]
     }
 
     /// Builds a phenotype from the six values in factor-table order.
     pub fn from_values(v: [f64; 6]) -> Self {
-        Self { gender: v[0], age: v[1], muscle: v[2], weight: v[3], height: v[4], proportions: v[5] }
+        Self {
+            gender: v[0],
+            age: v[1],
+            muscle: v[2],
+            weight: v[3],
+            height: v[4],
+            proportions: v[5],
+        }
     }
 
     /// Checks every value is finite, in [0, 1] and inside the asset's anchor range.
@@ -71,7 +100,9 @@ impl Phenotype {
             if x < lo - 1e-12 || x > hi + 1e-12 {
                 return Err(BodyError::param(
                     field,
-                    format!("{x} is outside this asset's range [{lo:.4}, {hi:.4}] (the shipped asset covers adults)"),
+                    format!(
+                        "{x} is outside this asset's range [{lo:.4}, {hi:.4}] (the shipped asset covers adults)"
+                    ),
                 ));
             }
         }
@@ -84,17 +115,32 @@ impl Phenotype {
     }
 
     /// [`Self::coefficients`] for explicit anchors and factor table.
-    pub fn coefficients_with(&self, anchors: &[Vec<f64>], table: &[[i8; 7]]) -> Result<Vec<f64>, BodyError> {
+    pub fn coefficients_with(
+        &self,
+        anchors: &[Vec<f64>],
+        table: &[[i8; 7]],
+    ) -> Result<Vec<f64>, BodyError> {
         self.validate_with(anchors)?;
-        let weights: Vec<Vec<f64>> =
-            self.values().iter().enumerate().map(|(k, &x)| anchor_weights(x, &anchors[k])).collect();
+        let weights: Vec<Vec<f64>> = self
+            .values()
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| anchor_weights(x, &anchors[k]))
+            .collect();
         Ok(table
             .iter()
             .map(|row| {
-                row.iter().enumerate().filter(|(_, a)| **a >= 0).fold(1.0, |c, (k, &a)| {
-                    // Race weights are fixed at 1/3 each.
-                    c * if k == 6 { 1.0 / 3.0 } else { weights[k][a as usize] }
-                })
+                row.iter()
+                    .enumerate()
+                    .filter(|(_, a)| **a >= 0)
+                    .fold(1.0, |c, (k, &a)| {
+                        // Race weights are fixed at 1/3 each.
+                        c * if k == 6 {
+                            1.0 / 3.0
+                        } else {
+                            weights[k][a as usize]
+                        }
+                    })
             })
             .collect())
     }
@@ -109,7 +155,11 @@ pub fn anchor_weights(x: f64, anchors: &[f64]) -> Vec<f64> {
         return w;
     }
     let x = x.clamp(anchors[0], anchors[n - 1]);
-    let i = anchors.iter().position(|&a| a >= x).unwrap_or(n - 1).clamp(1, n - 1);
+    let i = anchors
+        .iter()
+        .position(|&a| a >= x)
+        .unwrap_or(n - 1)
+        .clamp(1, n - 1);
     let t = (x - anchors[i - 1]) / (anchors[i] - anchors[i - 1]);
     w[i - 1] = 1.0 - t;
     w[i] = t;

@@ -20,7 +20,11 @@ pub struct ShapedBody<T: Real> {
 }
 
 fn v3<T: Real>(p: &[f32; 3]) -> Vector3<T> {
-    Vector3::new(T::of(f64::from(p[0])), T::of(f64::from(p[1])), T::of(f64::from(p[2])))
+    Vector3::new(
+        T::of(f64::from(p[0])),
+        T::of(f64::from(p[1])),
+        T::of(f64::from(p[2])),
+    )
 }
 
 fn apply<T: Real>(mean: &[[f32; 3]], basis: &[f32], z: &[T], out: &mut [Vector3<T>]) {
@@ -29,7 +33,11 @@ fn apply<T: Real>(mean: &[[f32; 3]], basis: &[f32], z: &[T], out: &mut [Vector3<
         let mut p = v3::<T>(&mean[i]);
         for (r, &zr) in z.iter().enumerate() {
             let e = &basis[(r * n + i) * 3..(r * n + i) * 3 + 3];
-            p += Vector3::new(T::of(f64::from(e[0])), T::of(f64::from(e[1])), T::of(f64::from(e[2]))) * zr;
+            p += Vector3::new(
+                T::of(f64::from(e[0])),
+                T::of(f64::from(e[1])),
+                T::of(f64::from(e[2])),
+            ) * zr;
         }
         *o = p;
     });
@@ -42,23 +50,46 @@ pub fn shape_into<T: Real>(asset: &BodyAsset, z: &[T], out: &mut ShapedBody<T>) 
     out.vertices.resize(asset.n_vertices(), Vector3::zeros());
     out.joint_heads.resize(asset.n_joints(), Vector3::zeros());
     out.joint_tails.resize(asset.n_joints(), Vector3::zeros());
-    apply(&asset.mean_vertices, &asset.shape_basis_vertices, z, &mut out.vertices);
-    apply(&asset.mean_joint_heads, &asset.shape_basis_joint_heads, z, &mut out.joint_heads);
-    apply(&asset.mean_joint_tails, &asset.shape_basis_joint_tails, z, &mut out.joint_tails);
+    apply(
+        &asset.mean_vertices,
+        &asset.shape_basis_vertices,
+        z,
+        &mut out.vertices,
+    );
+    apply(
+        &asset.mean_joint_heads,
+        &asset.shape_basis_joint_heads,
+        z,
+        &mut out.joint_heads,
+    );
+    apply(
+        &asset.mean_joint_tails,
+        &asset.shape_basis_joint_tails,
+        z,
+        &mut out.joint_tails,
+    );
 }
 
 /// VJP: `∂L/∂z_i = Σ_v ∂L/∂v · E_v[i] + Σ_c ∂L/∂h_c · E_h[i]` (tails do not affect posing).
-pub fn shape_vjp<T: Real>(asset: &BodyAsset, d_vertices: &[Vector3<T>], d_heads: &[Vector3<T>], d_z: &mut [T]) {
+pub fn shape_vjp<T: Real>(
+    asset: &BodyAsset,
+    d_vertices: &[Vector3<T>],
+    d_heads: &[Vector3<T>],
+    d_z: &mut [T],
+) {
     let (v, j) = (asset.n_vertices(), asset.n_joints());
     d_z.par_iter_mut().enumerate().for_each(|(r, dz)| {
         let dot = |basis: &[f32], n: usize, d: &[Vector3<T>]| {
             let mut s = T::zero();
             for i in 0..n {
                 let e = &basis[(r * n + i) * 3..(r * n + i) * 3 + 3];
-                s += d[i].x * T::of(f64::from(e[0])) + d[i].y * T::of(f64::from(e[1])) + d[i].z * T::of(f64::from(e[2]));
+                s += d[i].x * T::of(f64::from(e[0]))
+                    + d[i].y * T::of(f64::from(e[1]))
+                    + d[i].z * T::of(f64::from(e[2]));
             }
             s
         };
-        *dz = dot(&asset.shape_basis_vertices, v, d_vertices) + dot(&asset.shape_basis_joint_heads, j, d_heads);
+        *dz = dot(&asset.shape_basis_vertices, v, d_vertices)
+            + dot(&asset.shape_basis_joint_heads, j, d_heads);
     });
 }

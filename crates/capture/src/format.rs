@@ -28,7 +28,11 @@ pub struct CaptureFile {
     #[serde(default, rename = "object")]
     pub objects: Vec<ObjectSpec>,
     /// Further calibrated cameras (for renders of the result), never read as input images.
-    #[serde(default, rename = "extra_camera", skip_serializing_if = "Vec::is_empty")]
+    #[serde(
+        default,
+        rename = "extra_camera",
+        skip_serializing_if = "Vec::is_empty"
+    )]
     pub extra_cameras: Vec<ExtraCamera>,
     /// Free-form description (rig, scene, simulator seed …).
     #[serde(default, skip_serializing_if = "String::is_empty")]

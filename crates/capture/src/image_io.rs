@@ -18,7 +18,11 @@ pub struct Image<T> {
 impl<T: Copy> Image<T> {
     /// An image filled with `v`.
     pub fn filled(width: u32, height: u32, v: T) -> Self {
-        Self { width, height, data: vec![v; (width * height) as usize] }
+        Self {
+            width,
+            height,
+            data: vec![v; (width * height) as usize],
+        }
     }
     /// The pixel at (col, row).
     pub fn at(&self, col: u32, row: u32) -> T {
@@ -26,21 +30,40 @@ impl<T: Copy> Image<T> {
     }
     /// Applies `f` to every pixel.
     pub fn map<U>(&self, f: impl Fn(T) -> U) -> Image<U> {
-        Image { width: self.width, height: self.height, data: self.data.iter().map(|&x| f(x)).collect() }
+        Image {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&x| f(x)).collect(),
+        }
     }
 }
 
 fn decode(path: &Path) -> Result<DynamicImage, CaptureError> {
     let bytes = std::fs::read(path).map_err(|e| CaptureError::file(path, e.to_string()))?;
-    image::load_from_memory(&bytes).map_err(|e| CaptureError::file(path, format!("cannot decode the image ({e}): truncated or not an image?")))
+    image::load_from_memory(&bytes).map_err(|e| {
+        CaptureError::file(
+            path,
+            format!("cannot decode the image ({e}): truncated or not an image?"),
+        )
+    })
 }
 
 /// Reads a 16-bit single-channel PNG/TIFF; 8-bit and colour images are errors (they cannot
 /// hold depth in millimetres or radiometric counts).
 pub fn read_gray16_png(path: &Path) -> Result<Image<u16>, CaptureError> {
     match decode(path)? {
-        DynamicImage::ImageLuma16(img) => Ok(Image { width: img.width(), height: img.height(), data: img.into_raw() }),
-        other => Err(CaptureError::file(path, format!("expected a 16-bit single-channel image, found {:?}", other.color()))),
+        DynamicImage::ImageLuma16(img) => Ok(Image {
+            width: img.width(),
+            height: img.height(),
+            data: img.into_raw(),
+        }),
+        other => Err(CaptureError::file(
+            path,
+            format!(
+                "expected a 16-bit single-channel image, found {:?}",
+                other.color()
+            ),
+        )),
     }
 }
 
@@ -49,42 +72,79 @@ pub fn read_float(path: &Path) -> Result<Image<f64>, CaptureError> {
     let fail = |r: String| CaptureError::file(path, r);
     if path.extension().and_then(|e| e.to_str()) == Some("npy") {
         let bytes = std::fs::read(path).map_err(|e| fail(e.to_string()))?;
-        let npy = npyz::NpyFile::new(bytes.as_slice()).map_err(|e| fail(format!("not a .npy file: {e}")))?;
+        let npy = npyz::NpyFile::new(bytes.as_slice())
+            .map_err(|e| fail(format!("not a .npy file: {e}")))?;
         let shape = npy.shape().to_vec();
-        let [h, w] = shape[..] else { return Err(fail(format!("expected a 2-D array, got shape {shape:?}"))) };
+        let [h, w] = shape[..] else {
+            return Err(fail(format!("expected a 2-D array, got shape {shape:?}")));
+        };
         if npy.order() != npyz::Order::C {
             return Err(fail("Fortran-ordered arrays are not supported".into()));
         }
         let descr = npy.dtype().descr().trim_matches('\'').to_string();
         let io = |e: std::io::Error| fail(format!("truncated or corrupt data: {e}"));
         let data: Vec<f64> = match descr.as_str() {
-            "<f4" => npy.into_vec::<f32>().map_err(io)?.into_iter().map(f64::from).collect(),
+            "<f4" => npy
+                .into_vec::<f32>()
+                .map_err(io)?
+                .into_iter()
+                .map(f64::from)
+                .collect(),
             "<f8" => npy.into_vec::<f64>().map_err(io)?,
-            d => return Err(fail(format!("unsupported dtype {d}: thermal .npy must be float32 or float64"))),
+            d => {
+                return Err(fail(format!(
+                    "unsupported dtype {d}: thermal .npy must be float32 or float64"
+                )));
+            }
         };
         if data.len() as u64 != h * w {
             return Err(fail("truncated data".into()));
         }
-        return Ok(Image { width: w as u32, height: h as u32, data });
+        return Ok(Image {
+            width: w as u32,
+            height: h as u32,
+            data,
+        });
     }
     match decode(path)? {
-        DynamicImage::ImageLuma16(img) => Ok(Image { width: img.width(), height: img.height(), data: img.into_raw().into_iter().map(f64::from).collect() }),
-        DynamicImage::ImageRgb32F(img) => Ok(Image { width: img.width(), height: img.height(), data: img.pixels().map(|p| f64::from(p[0])).collect() }),
-        other => Err(CaptureError::file(path, format!("expected a float or 16-bit single-channel image, found {:?}", other.color()))),
+        DynamicImage::ImageLuma16(img) => Ok(Image {
+            width: img.width(),
+            height: img.height(),
+            data: img.into_raw().into_iter().map(f64::from).collect(),
+        }),
+        DynamicImage::ImageRgb32F(img) => Ok(Image {
+            width: img.width(),
+            height: img.height(),
+            data: img.pixels().map(|p| f64::from(p[0])).collect(),
+        }),
+        other => Err(CaptureError::file(
+            path,
+            format!(
+                "expected a float or 16-bit single-channel image, found {:?}",
+                other.color()
+            ),
+        )),
     }
 }
 
 /// Reads a mask: any PNG; a pixel is inside where its first channel is non-zero.
 pub fn read_mask(path: &Path) -> Result<Image<bool>, CaptureError> {
     let img = decode(path)?.into_luma16();
-    Ok(Image { width: img.width(), height: img.height(), data: img.into_raw().into_iter().map(|v| v > 0).collect() })
+    Ok(Image {
+        width: img.width(),
+        height: img.height(),
+        data: img.into_raw().into_iter().map(|v| v > 0).collect(),
+    })
 }
 
 /// Reads an 8-bit RGB image.
 pub fn read_rgb(path: &Path) -> Result<(u32, u32), CaptureError> {
     let img = decode(path)?;
     if img.color().bytes_per_pixel() < 3 {
-        return Err(CaptureError::file(path, format!("expected an RGB image, found {:?}", img.color())));
+        return Err(CaptureError::file(
+            path,
+            format!("expected an RGB image, found {:?}", img.color()),
+        ));
     }
     Ok((img.width(), img.height()))
 }
@@ -92,13 +152,17 @@ pub fn read_rgb(path: &Path) -> Result<(u32, u32), CaptureError> {
 /// Writes a 16-bit grayscale PNG.
 pub fn write_gray16_png(img: &Image<u16>, path: &Path) -> Result<(), CaptureError> {
     let buf: ImageBuffer<Luma<u16>, Vec<u16>> =
-        ImageBuffer::from_raw(img.width, img.height, img.data.clone()).ok_or_else(|| CaptureError::file(path, "image size mismatch"))?;
-    buf.save(path).map_err(|e| CaptureError::file(path, e.to_string()))
+        ImageBuffer::from_raw(img.width, img.height, img.data.clone())
+            .ok_or_else(|| CaptureError::file(path, "image size mismatch"))?;
+    buf.save(path)
+        .map_err(|e| CaptureError::file(path, e.to_string()))
 }
 
 /// Writes an 8-bit grayscale PNG.
 pub fn write_gray8_png(img: &Image<u8>, path: &Path) -> Result<(), CaptureError> {
     let buf: ImageBuffer<Luma<u8>, Vec<u8>> =
-        ImageBuffer::from_raw(img.width, img.height, img.data.clone()).ok_or_else(|| CaptureError::file(path, "image size mismatch"))?;
-    buf.save(path).map_err(|e| CaptureError::file(path, e.to_string()))
+        ImageBuffer::from_raw(img.width, img.height, img.data.clone())
+            .ok_or_else(|| CaptureError::file(path, "image size mismatch"))?;
+    buf.save(path)
+        .map_err(|e| CaptureError::file(path, e.to_string()))
 }

@@ -20,8 +20,11 @@ pub mod image_io;
 mod load;
 pub mod planck;
 
-pub use format::{CameraSpec, CaptureFile, DepthSpec, ExtraCamera, FORMAT, ObjectSpec, RgbSpec, ThermalCameraSpec, ThermalSpec, ThermalUnits};
-pub use image_io::{Image, read_gray16_png, write_gray16_png, write_gray8_png};
+pub use format::{
+    CameraSpec, CaptureFile, DepthSpec, ExtraCamera, FORMAT, ObjectSpec, RgbSpec,
+    ThermalCameraSpec, ThermalSpec, ThermalUnits,
+};
+pub use image_io::{Image, read_gray16_png, write_gray8_png, write_gray16_png};
 pub use load::{Capture, CapturedObject};
 
 use std::path::PathBuf;
@@ -51,6 +54,9 @@ pub enum CaptureError {
 
 impl CaptureError {
     pub(crate) fn file(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
-        Self::File { path: path.into(), reason: reason.into() }
+        Self::File {
+            path: path.into(),
+            reason: reason.into(),
+        }
     }
 }

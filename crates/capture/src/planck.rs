@@ -34,7 +34,11 @@ pub fn band_radiance(temp_k: f64) -> f64 {
 /// Table of `band_radiance` every 0.1 K over 100–700 K for fast inversion.
 fn table() -> &'static [f64] {
     static T: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
-    T.get_or_init(|| (0..=6000).map(|i| band_radiance(100.0 + 0.1 * f64::from(i))).collect())
+    T.get_or_init(|| {
+        (0..=6000)
+            .map(|i| band_radiance(100.0 + 0.1 * f64::from(i)))
+            .collect()
+    })
 }
 
 /// The temperature whose band radiance is `radiance` (apparent or brightness temperature), K.
@@ -46,7 +50,9 @@ pub fn temperature_of(radiance: f64) -> f64 {
     }
     let tab = table();
     if radiance > tab[0] && radiance < tab[tab.len() - 1] {
-        let i = tab.partition_point(|&l| l < radiance).clamp(1, tab.len() - 1);
+        let i = tab
+            .partition_point(|&l| l < radiance)
+            .clamp(1, tab.len() - 1);
         let (l0, l1) = (tab[i - 1], tab[i]);
         let t0 = 100.0 + 0.1 * (i - 1) as f64;
         let t = t0 + 0.1 * (radiance - l0) / (l1 - l0);

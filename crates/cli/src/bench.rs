@@ -92,21 +92,61 @@ pub(crate) fn median_ms(mut f: impl FnMut(), reps: usize) -> f64 {
 /// Runs a benchmark.
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
-        BenchCommand::Render { scene, reps, no_dense, epsilon, aggregation } => crate::bench_render::run(&scene, reps, no_dense, &epsilon, aggregation.into()),
-        BenchCommand::Objects { preset, seeds, segment, shapes, prior } => crate::bench_objects::run(preset, shapes.into(), prior.into(), seeds, segment),
+        BenchCommand::Render {
+            scene,
+            reps,
+            no_dense,
+            epsilon,
+            aggregation,
+        } => crate::bench_render::run(&scene, reps, no_dense, &epsilon, aggregation.into()),
+        BenchCommand::Objects {
+            preset,
+            seeds,
+            segment,
+            shapes,
+            prior,
+        } => crate::bench_objects::run(preset, shapes.into(), prior.into(), seeds, segment),
         BenchCommand::Body { reps } => {
             let model = BodyModel::builtin()?;
-            let z: Vec<f32> = model.shape_coefficients(&Phenotype::default())?.iter().map(|&x| x as f32).collect();
+            let z: Vec<f32> = model
+                .shape_coefficients(&Phenotype::default())?
+                .iter()
+                .map(|&x| x as f32)
+                .collect();
             let mut shaped = model.shaped(&z)?;
-            let rot: Vec<[f32; 3]> = (0..model.n_joints()).map(|c| [0.1 * (c % 3) as f32, -0.05, 0.07]).collect();
+            let rot: Vec<[f32; 3]> = (0..model.n_joints())
+                .map(|c| [0.1 * (c % 3) as f32, -0.05, 0.07])
+                .collect();
             let pose = Pose::from_axis_angles(&rot, Vector3::new(0.0, 0.0, 1.0));
             let mut posed = model.posed_buffers();
             let gv = vec![Vector3::new(0.1f32, -0.2, 0.3); model.n_vertices()];
-            let mut grad = BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] };
+            let mut grad = BodyGrad {
+                rotations: vec![],
+                translation: Vector3::zeros(),
+                shape: vec![],
+            };
             let shape_ms = median_ms(|| shaped = model.shaped(&z).expect("valid z"), reps);
-            let fwd_ms = median_ms(|| model.pose_into(&shaped, &pose, &mut posed).expect("valid pose"), reps);
+            let fwd_ms = median_ms(
+                || {
+                    model
+                        .pose_into(&shaped, &pose, &mut posed)
+                        .expect("valid pose")
+                },
+                reps,
+            );
             let bwd_ms = median_ms(
-                || model.backward(&shaped, &pose, &mut posed, OutputGrads { vertices: Some(&gv), ..Default::default() }, &mut grad),
+                || {
+                    model.backward(
+                        &shaped,
+                        &pose,
+                        &mut posed,
+                        OutputGrads {
+                            vertices: Some(&gv),
+                            ..Default::default()
+                        },
+                        &mut grad,
+                    )
+                },
                 reps,
             );
             println!(
@@ -125,7 +165,6 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         }
     }
 }
-
 
 /// `--aggregation` of `bench render`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

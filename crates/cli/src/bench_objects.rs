@@ -11,15 +11,15 @@
 //! figure is summarised over the mugs whose handle the depth camera saw (≥ [`HANDLE_SEEN_PX`]
 //! mask pixels on the handle side of the true cup) and the rest are counted apart.
 
+use crate::simulate_cmd::{Preset, Thermal, preset_scene_with};
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_capture::Capture;
 use irmirror_geom::Similarity3;
-use irmirror_geom::nalgebra::Vector3;
 use irmirror_geom::TriMesh;
+use irmirror_geom::nalgebra::Vector3;
 use irmirror_recon::objects::{ObjectPrior, Stage1Config, reconstruct_objects};
 use irmirror_sim::presets::Shapes;
-use crate::simulate_cmd::{Preset, Thermal, preset_scene_with};
 use std::time::Instant;
 
 /// One fitted object against its truth.
@@ -41,7 +41,10 @@ struct Row {
 /// Centre (depth frame) and half-diagonal (metres) of a depth-frame mesh's bounding box in the
 /// axes of `frame` (an object frame): robust to the holes marching leaves in thin walls.
 fn box_in_frame(m: &TriMesh, frame: &Similarity3<f64>) -> (Vector3<f64>, f64) {
-    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    let (mut lo, mut hi) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
     for v in &m.vertices {
         let q = frame.rotation.tr_mul(&Vector3::from(v.map(f64::from)));
         lo = lo.inf(&q);
@@ -61,9 +64,17 @@ const HANDLE_SEEN_PX: usize = 3;
 /// origin: a family shape is centred on its bounding box). The cup's widest radius is half the
 /// mesh's Z extent, its axis that far in from the −X extreme; a point more than 5 % beyond
 /// that radius on +X is the handle's.
-fn handle_pixels(capture: &Capture, mask: &irmirror_capture::Image<bool>, truth: &Similarity3<f64>, true_mesh: &TriMesh) -> usize {
+fn handle_pixels(
+    capture: &Capture,
+    mask: &irmirror_capture::Image<bool>,
+    truth: &Similarity3<f64>,
+    true_mesh: &TriMesh,
+) -> usize {
     let local = |p: &Vector3<f64>| truth.inverse_transform_point(p);
-    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    let (mut lo, mut hi) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
     for v in &true_mesh.vertices {
         let q = local(&Vector3::from(v.map(f64::from)));
         lo = lo.inf(&q);
@@ -77,31 +88,62 @@ fn handle_pixels(capture: &Capture, mask: &irmirror_capture::Image<bool>, truth:
         .enumerate()
         .filter(|&(i, &m)| m && depth.data[i].is_finite() && depth.data[i] > 0.0)
         .filter(|&(i, _)| {
-            let p = capture.depth_camera.unproject((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5, f64::from(depth.data[i]));
+            let p = capture.depth_camera.unproject(
+                (i as u32 % w) as f64 + 0.5,
+                (i as u32 / w) as f64 + 0.5,
+                f64::from(depth.data[i]),
+            );
             local(&p).x - axis_x > 1.05 * radius
         })
         .count()
 }
 
 /// Translation (mm), up-axis (°), full rotation (°) and scale (%) errors.
-fn errors(fit: &Similarity3<f64>, fit_mesh: &TriMesh, truth: &Similarity3<f64>, true_mesh: &TriMesh) -> (f64, f64, f64, f64) {
+fn errors(
+    fit: &Similarity3<f64>,
+    fit_mesh: &TriMesh,
+    truth: &Similarity3<f64>,
+    true_mesh: &TriMesh,
+) -> (f64, f64, f64, f64) {
     let ((cf, rf), (ct, rt)) = (box_in_frame(fit_mesh, fit), box_in_frame(true_mesh, truth));
-    let up = (fit.rotation * Vector3::y()).angle(&(truth.rotation * Vector3::y())).to_degrees();
+    let up = (fit.rotation * Vector3::y())
+        .angle(&(truth.rotation * Vector3::y()))
+        .to_degrees();
     let d = fit.rotation * truth.rotation.transpose();
-    let full = ((d.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
-    ((cf - ct).norm() * 1e3, up, full, (rf / rt - 1.0).abs() * 100.0)
+    let full = ((d.trace() - 1.0) / 2.0)
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees();
+    (
+        (cf - ct).norm() * 1e3,
+        up,
+        full,
+        (rf / rt - 1.0).abs() * 100.0,
+    )
 }
 
 /// Simulates `seeds` captures of `preset` (objects from `shapes`), runs stage 1 with `prior` on
 /// each (masks as the capture gives them, or segmentation with `segment`), prints one row per
 /// object and a summary per category.
-pub fn run(preset: Preset, shapes: Shapes, prior: ObjectPrior, seeds: u64, segment: bool) -> Result<()> {
+pub fn run(
+    preset: Preset,
+    shapes: Shapes,
+    prior: ObjectPrior,
+    seeds: u64,
+    segment: bool,
+) -> Result<()> {
     let model = BodyModel::builtin()?;
     let mut cfg = Stage1Config::default();
     cfg.fit.prior = prior;
-    let scratch = std::env::temp_dir().join(format!("irmirror-bench-objects-{}", std::process::id()));
+    let scratch =
+        std::env::temp_dir().join(format!("irmirror-bench-objects-{}", std::process::id()));
     let bar = indicatif::ProgressBar::new(seeds);
-    bar.set_style(indicatif::ProgressStyle::with_template("bench objects {bar:40} {pos}/{len} captures {elapsed}/{eta}").expect("valid template"));
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "bench objects {bar:40} {pos}/{len} captures {elapsed}/{eta}",
+        )
+        .expect("valid template"),
+    );
     let mut rows = Vec::new();
     for seed in 0..seeds {
         let scene = preset_scene_with(&model, preset, Thermal::Lepton, shapes, seed)?;
@@ -122,12 +164,23 @@ pub fn run(preset: Preset, shapes: Shapes, prior: ObjectPrior, seeds: u64, segme
             capture.objects.iter_mut().for_each(|o| o.mask = None);
         }
         let t0 = Instant::now();
-        let objects = reconstruct_objects(&capture, &cfg, seed).with_context(|| format!("seed {seed}: stage 1"))?;
+        let objects = reconstruct_objects(&capture, &cfg, seed)
+            .with_context(|| format!("seed {seed}: stage 1"))?;
         let time_s = t0.elapsed().as_secs_f64() / objects.objects.len() as f64;
         for (k, (truth, true_mesh)) in sim.object_poses.iter().zip(&sim.object_meshes).enumerate() {
             // Segmented objects come largest first: pair each true object with the nearest fit.
             let fit = if segment {
-                objects.objects.iter().min_by(|a, b| (a.depth_from_object.translation - truth.translation).norm().total_cmp(&(b.depth_from_object.translation - truth.translation).norm())).expect("at least one object")
+                objects
+                    .objects
+                    .iter()
+                    .min_by(|a, b| {
+                        (a.depth_from_object.translation - truth.translation)
+                            .norm()
+                            .total_cmp(
+                                &(b.depth_from_object.translation - truth.translation).norm(),
+                            )
+                    })
+                    .expect("at least one object")
             } else {
                 &objects.objects[k]
             };
@@ -152,14 +205,35 @@ pub fn run(preset: Preset, shapes: Shapes, prior: ObjectPrior, seeds: u64, segme
     }
     bar.finish_and_clear();
     std::fs::remove_dir_all(&scratch).ok();
-    println!("stage 1 ({prior:?} prior) on the {preset:?} preset ({shapes:?} shapes), seeds 0–{}, {} objects, masks {}, {} threads", seeds.saturating_sub(1), rows.len(), if segment { "segmented" } else { "given" }, rayon::current_num_threads());
-    println!("\n| seed | object | translation (mm) | up axis (°) | rotation (°) (handle pixels) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|");
+    println!(
+        "stage 1 ({prior:?} prior) on the {preset:?} preset ({shapes:?} shapes), seeds 0–{}, {} objects, masks {}, {} threads",
+        seeds.saturating_sub(1),
+        rows.len(),
+        if segment { "segmented" } else { "given" },
+        rayon::current_num_threads()
+    );
+    println!(
+        "\n| seed | object | translation (mm) | up axis (°) | rotation (°) (handle pixels) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|"
+    );
     for r in &rows {
-        let rot = r.rotation_deg.map_or("–".to_string(), |x| if r.handle_seen { format!("{x:.1} ({} px)", r.handle_px) } else { format!("{x:.1} (hidden: {} px)", r.handle_px) });
-        println!("| {} | {} | {:.1} | {:.2} | {rot} | {:.1} | {:.2} | {:.2} |", r.seed, r.category, r.translation_mm, r.up_deg, r.scale_pct, r.chamfer_mm2, r.time_s);
+        let rot = r.rotation_deg.map_or("–".to_string(), |x| {
+            if r.handle_seen {
+                format!("{x:.1} ({} px)", r.handle_px)
+            } else {
+                format!("{x:.1} (hidden: {} px)", r.handle_px)
+            }
+        });
+        println!(
+            "| {} | {} | {:.1} | {:.2} | {rot} | {:.1} | {:.2} | {:.2} |",
+            r.seed, r.category, r.translation_mm, r.up_deg, r.scale_pct, r.chamfer_mm2, r.time_s
+        );
     }
-    println!("\nmedian / 90th percentile / max (goals: ≤ 5 mm, ≤ 3°, ≤ 3 %, ≤ 2 s per object); mug rotation over the mugs whose handle was seen\n");
-    println!("| object | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|");
+    println!(
+        "\nmedian / 90th percentile / max (goals: ≤ 5 mm, ≤ 3°, ≤ 3 %, ≤ 2 s per object); mug rotation over the mugs whose handle was seen\n"
+    );
+    println!(
+        "| object | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|"
+    );
     let mut categories: Vec<&str> = rows.iter().map(|r| r.category).collect();
     categories.sort();
     categories.dedup();
@@ -167,12 +241,20 @@ pub fn run(preset: Preset, shapes: Shapes, prior: ObjectPrior, seeds: u64, segme
         let sel: Vec<&Row> = rows.iter().filter(|r| r.category == c).collect();
         let col = |f: &dyn Fn(&Row) -> Option<f64>| {
             let v: Vec<f64> = sel.iter().filter_map(|r| f(r)).collect();
-            if v.is_empty() { "–".to_string() } else { stats(v) }
+            if v.is_empty() {
+                "–".to_string()
+            } else {
+                stats(v)
+            }
         };
         println!(
             "| {c} | {}{} | {} | {} | {} | {} | {} | {} |",
             sel.len(),
-            match sel.iter().filter(|r| r.rotation_deg.is_some() && !r.handle_seen).count() {
+            match sel
+                .iter()
+                .filter(|r| r.rotation_deg.is_some() && !r.handle_seen)
+                .count()
+            {
                 0 => String::new(),
                 hidden => format!(" ({hidden} handle hidden)"),
             },
@@ -191,7 +273,13 @@ pub fn run(preset: Preset, shapes: Shapes, prior: ObjectPrior, seeds: u64, segme
 fn stats(mut v: Vec<f64>) -> String {
     v.sort_by(f64::total_cmp);
     let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
-    let f = |x: f64| if x < 10.0 { format!("{x:.2}") } else { format!("{x:.1}") };
+    let f = |x: f64| {
+        if x < 10.0 {
+            format!("{x:.2}")
+        } else {
+            format!("{x:.1}")
+        }
+    };
     format!("{} / {} / {}", f(q(0.5)), f(q(0.9)), f(v[v.len() - 1]))
 }
 
@@ -201,20 +289,40 @@ mod tests {
     fn box_in_a_rotated_frame() {
         use irmirror_geom::nalgebra::{Matrix3, Vector3};
         let mut cube = irmirror_geom::mesh::unit_cube();
-        let frame = irmirror_geom::Similarity3 { rotation: irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::new(0.3, -0.5, 0.2)), translation: Vector3::new(1.0, 2.0, 3.0), scale: 2.0 };
+        let frame = irmirror_geom::Similarity3 {
+            rotation: irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::new(0.3, -0.5, 0.2)),
+            translation: Vector3::new(1.0, 2.0, 3.0),
+            scale: 2.0,
+        };
         // The cube [0, 1]³ in the frame's axes, shifted by (1, 2, 3).
-        cube.map_vertices(|v| (frame.rotation * Vector3::from(v.map(f64::from)) + frame.translation).map(|x| x as f32).into());
+        cube.map_vertices(|v| {
+            (frame.rotation * Vector3::from(v.map(f64::from)) + frame.translation)
+                .map(|x| x as f32)
+                .into()
+        });
         let (c, r) = super::box_in_frame(&cube, &frame);
-        assert!((c - (frame.rotation * Vector3::repeat(0.5) + frame.translation)).norm() < 1e-5, "{c}");
+        assert!(
+            (c - (frame.rotation * Vector3::repeat(0.5) + frame.translation)).norm() < 1e-5,
+            "{c}"
+        );
         assert!((r - 3f64.sqrt() / 2.0).abs() < 1e-5, "{r}");
         // In the camera's axes the same cube's box is larger.
-        let (_, r_axis) = super::box_in_frame(&cube, &irmirror_geom::Similarity3 { rotation: Matrix3::identity(), ..frame });
+        let (_, r_axis) = super::box_in_frame(
+            &cube,
+            &irmirror_geom::Similarity3 {
+                rotation: Matrix3::identity(),
+                ..frame
+            },
+        );
         assert!(r_axis > r + 0.05);
     }
 
     #[test]
     fn stats_are_order_statistics() {
         assert_eq!(super::stats(vec![3.0, 1.0, 2.0]), "2.00 / 3.00 / 3.00");
-        assert_eq!(super::stats((1..=11).map(f64::from).rev().collect()), "6.00 / 10.0 / 11.0");
+        assert_eq!(
+            super::stats((1..=11).map(f64::from).rev().collect()),
+            "6.00 / 10.0 / 11.0"
+        );
     }
 }

@@ -7,7 +7,8 @@ use irmirror_geom::nalgebra::Vector3;
 use irmirror_render::bench_scene::BenchScene;
 use irmirror_render::hard::hard_mask;
 use irmirror_render::{
-    Aggregation, Culling, Normals, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer, SurfaceMethod, TraceParams, reflect_camera, soft_iou_loss,
+    Aggregation, Culling, Normals, OccupancyGrad, OccupancyParams, ReflectedRays, SoftRenderer,
+    SurfaceMethod, TraceParams, reflect_camera, soft_iou_loss,
 };
 use std::path::Path;
 use std::time::Instant;
@@ -16,7 +17,11 @@ use std::time::Instant;
 fn peak_rss() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kb| kb * 1024)
+    line.split_whitespace()
+        .nth(1)?
+        .parse::<u64>()
+        .ok()
+        .map(|kb| kb * 1024)
 }
 
 /// Resets the peak-RSS counter (Linux `clear_refs` 5); false where not permitted.
@@ -52,20 +57,42 @@ fn pass(
     renderer.backward(rays, &occ, d, params, culling, grad);
     let t3 = Instant::now();
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
-    PassResult { loss: f64::from(loss), grad: grad.vertices.clone(), pairs: occ.pairs, split_ms: [ms(t0, t1), ms(t1, t2), ms(t2, t3)] }
+    PassResult {
+        loss: f64::from(loss),
+        grad: grad.vertices.clone(),
+        pairs: occ.pairs,
+        split_ms: [ms(t0, t1), ms(t1, t2), ms(t2, t3)],
+    }
 }
 
 /// Runs the benchmark and prints its tables.
-pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64], aggregation: Aggregation) -> Result<()> {
+pub fn run(
+    path: &Path,
+    reps: usize,
+    no_dense: bool,
+    epsilons: &[f64],
+    aggregation: Aggregation,
+) -> Result<()> {
     if let Some(e) = epsilons.iter().find(|e| !(**e > 0.0 && **e < 0.5)) {
         bail!("--epsilon must be in (0, 0.5), got {e}");
     }
     let mut scene = BenchScene::load(path)?;
     scene.occupancy.aggregation = aggregation;
     // The scene's reflector is an exact sphere: trace it to 1e-6 of its radius.
-    let trace = TraceParams { coarse_tol_rel: 1e-6, method: SurfaceMethod::SphereTrace { steps: 3 }, max_iters: 4096 };
+    let trace = TraceParams {
+        coarse_tol_rel: 1e-6,
+        method: SurfaceMethod::SphereTrace { steps: 3 },
+        max_iters: 4096,
+    };
     let t0 = Instant::now();
-    let rays = reflect_camera(&scene.camera, &Rigid3::identity(), std::slice::from_ref(&scene.sphere), &trace, Normals::Raw).cast::<f32>();
+    let rays = reflect_camera(
+        &scene.camera,
+        &Rigid3::identity(),
+        std::slice::from_ref(&scene.sphere),
+        &trace,
+        Normals::Raw,
+    )
+    .cast::<f32>();
     let rays_ms = t0.elapsed().as_secs_f64() * 1e3;
     let verts: Vec<Vector3<f32>> = scene.vertices.iter().map(|v| v.map(|x| x as f32)).collect();
     let target: Vec<f32> = scene.target.iter().map(|&x| x as f32).collect();
@@ -92,7 +119,11 @@ pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64], aggregati
     );
     println!(
         "hard mask vs reference: IoU {:.4} ({} vs {} pixels)",
-        if union > 0 { inter as f64 / union as f64 } else { 1.0 },
+        if union > 0 {
+            inter as f64 / union as f64
+        } else {
+            1.0
+        },
         hard.iter().filter(|h| **h).count(),
         scene.reference_hard.iter().filter(|r| **r > 0.5).count()
     );
@@ -108,15 +139,36 @@ pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64], aggregati
     let (mut grad, mut d) = (OccupancyGrad::default(), Vec::new());
     let mut fast_results = Vec::new();
     for &epsilon in epsilons {
-        let params = OccupancyParams { epsilon, ..scene.occupancy };
-        pass(&mut fast, &verts, &rays, &target, &params, Culling::Bvh, &mut grad, &mut d); // warm-up
+        let params = OccupancyParams {
+            epsilon,
+            ..scene.occupancy
+        };
+        pass(
+            &mut fast,
+            &verts,
+            &rays,
+            &target,
+            &params,
+            Culling::Bvh,
+            &mut grad,
+            &mut d,
+        ); // warm-up
         reset_peak_rss();
         let rss0 = peak_rss();
         let mut times = Vec::with_capacity(reps);
         let mut last = None;
         for _ in 0..reps.max(1) {
             let t = Instant::now();
-            let r = pass(&mut fast, &verts, &rays, &target, &params, Culling::Bvh, &mut grad, &mut d);
+            let r = pass(
+                &mut fast,
+                &verts,
+                &rays,
+                &target,
+                &params,
+                Culling::Bvh,
+                &mut grad,
+                &mut d,
+            );
             times.push(t.elapsed().as_secs_f64() * 1e3);
             last = Some(r);
         }
@@ -143,15 +195,40 @@ pub fn run(path: &Path, reps: usize, no_dense: bool, epsilons: &[f64], aggregati
     let rss1 = peak_rss();
     let mut dense = SoftRenderer::new(&verts, &scene.triangles);
     let t = Instant::now();
-    let dense_res = pass(&mut dense, &verts, &rays, &target, &scene.occupancy, Culling::Dense, &mut grad, &mut d);
+    let dense_res = pass(
+        &mut dense,
+        &verts,
+        &rays,
+        &target,
+        &scene.occupancy,
+        Culling::Dense,
+        &mut grad,
+        &mut d,
+    );
     let dense_ms = t.elapsed().as_secs_f64() * 1e3;
-    println!("| dense (every ray × every triangle) | {dense_ms:.0} ms | {} | {} | {:.6} |", dense_res.pairs, mb(rss1, peak_rss()), dense_res.loss);
-    let gmax = dense_res.grad.iter().map(|g| g.amax()).fold(0.0f32, f32::max);
+    println!(
+        "| dense (every ray × every triangle) | {dense_ms:.0} ms | {} | {} | {:.6} |",
+        dense_res.pairs,
+        mb(rss1, peak_rss()),
+        dense_res.loss
+    );
+    let gmax = dense_res
+        .grad
+        .iter()
+        .map(|g| g.amax())
+        .fold(0.0f32, f32::max);
     println!();
-    println!("| ε | speed-up vs dense | loss rel. difference | vertex gradient: max difference / max of dense |");
+    println!(
+        "| ε | speed-up vs dense | loss rel. difference | vertex gradient: max difference / max of dense |"
+    );
     println!("|---|---|---|---|");
     for (epsilon, ms, r) in &fast_results {
-        let gdiff = dense_res.grad.iter().zip(&r.grad).map(|(a, b)| (a - b).amax()).fold(0.0f32, f32::max);
+        let gdiff = dense_res
+            .grad
+            .iter()
+            .zip(&r.grad)
+            .map(|(a, b)| (a - b).amax())
+            .fold(0.0f32, f32::max);
         println!(
             "| {epsilon:.0e} | {:.0}× | {:.2e} | {:.2e} |",
             dense_ms / ms,

@@ -72,15 +72,33 @@ pub fn load_model(asset: Option<&Path>) -> Result<BodyModel> {
 /// Runs a body subcommand.
 pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
     match cmd {
-        BodyCommand::Import { wheel, out, rank, influences, keypoint_prune } => {
+        BodyCommand::Import {
+            wheel,
+            out,
+            rank,
+            influences,
+            keypoint_prune,
+        } => {
             let rank = match rank.as_str() {
                 "full" => None,
-                s => Some(s.parse::<usize>().ok().filter(|&r| r > 0).with_context(|| format!("--rank must be a positive number or `full`, got `{s}`"))?),
+                s => Some(
+                    s.parse::<usize>()
+                        .ok()
+                        .filter(|&r| r > 0)
+                        .with_context(|| {
+                            format!("--rank must be a positive number or `full`, got `{s}`")
+                        })?,
+                ),
             };
             if !(0.0..1.0).contains(&keypoint_prune) {
                 bail!("--keypoint-prune must be in [0, 1), got {keypoint_prune}");
             }
-            let opts = ImportOptions { rank, influences, keypoint_prune, progress };
+            let opts = ImportOptions {
+                rank,
+                influences,
+                keypoint_prune,
+                progress,
+            };
             let t0 = std::time::Instant::now();
             let (asset, report) = import_wheel(&wheel, &opts)?;
             asset.save(&out)?;
@@ -102,11 +120,22 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             );
             Ok(())
         }
-        BodyCommand::Check { vectors, asset, tolerance_m } => {
+        BodyCommand::Check {
+            vectors,
+            asset,
+            tolerance_m,
+        } => {
             let model = load_model(asset.as_deref())?;
             let outcomes = check_vectors(&model, &vectors)?;
-            println!("asset: rank {}, {} influences", model.rank(), model.asset.influences);
-            println!("{:>4}  {:>11} {:>11} {:>11} {:>11} {:>11} {:>11}", "case", "rest joints", "frames", "height", "joints", "vertices", "keypoints");
+            println!(
+                "asset: rank {}, {} influences",
+                model.rank(),
+                model.asset.influences
+            );
+            println!(
+                "{:>4}  {:>11} {:>11} {:>11} {:>11} {:>11} {:>11}",
+                "case", "rest joints", "frames", "height", "joints", "vertices", "keypoints"
+            );
             let mut worst = 0.0f64;
             for (i, o) in outcomes.iter().enumerate() {
                 match o {
@@ -114,7 +143,12 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
                         worst = worst.max(e.max_m());
                         println!(
                             "{i:>4}  {:>9.2e} m {:>11.2e} {:>9.2e} m {:>9.2e} m {:>9.2e} m {:>9.2e} m",
-                            e.rest_joints_m, e.rest_frames, e.rest_height_m, e.posed_joints_m, e.posed_vertices_m, e.keypoints_m
+                            e.rest_joints_m,
+                            e.rest_frames,
+                            e.rest_height_m,
+                            e.posed_joints_m,
+                            e.posed_vertices_m,
+                            e.keypoints_m
                         );
                     }
                     CaseOutcome::Skipped(why) => println!("{i:>4}  skipped: {why}"),
@@ -128,13 +162,26 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             }
             Ok(())
         }
-        BodyCommand::Sample { out, seed, count, asset } => {
+        BodyCommand::Sample {
+            out,
+            seed,
+            count,
+            asset,
+        } => {
             let model = load_model(asset.as_deref())?;
             let stage = Staging::new(&out, "run.toml")?;
             let mut rng = irmirror_geom::rng::seeded(seed, 0);
             let mut bodies = vec![
-                ("a-pose".to_string(), Phenotype::default(), irmirror_sim::people::named(&model, "a-pose", &mut rng)),
-                ("t-pose".to_string(), Phenotype::default(), irmirror_sim::people::named(&model, "t-pose", &mut rng)),
+                (
+                    "a-pose".to_string(),
+                    Phenotype::default(),
+                    irmirror_sim::people::named(&model, "a-pose", &mut rng),
+                ),
+                (
+                    "t-pose".to_string(),
+                    Phenotype::default(),
+                    irmirror_sim::people::named(&model, "t-pose", &mut rng),
+                ),
             ];
             for _ in 0..count {
                 let ph = irmirror_sim::people::random_phenotype(&mut rng);
@@ -156,13 +203,22 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             }
             let refs: Vec<_> = meshes.iter().collect();
             save_png(&preview_sheet(&refs, 256), &stage.path("preview.png"))?;
-            write_text(&stage.path("bodies.json"), &serde_json::to_string_pretty(&index)?)?;
+            write_text(
+                &stage.path("bodies.json"),
+                &serde_json::to_string_pretty(&index)?,
+            )?;
             write_text(
                 &stage.path("run.toml"),
-                &toml::to_string(&serde_json::json!({"command": "body sample", "seed": seed, "count": count, "version": env!("CARGO_PKG_VERSION")}))?,
+                &toml::to_string(
+                    &serde_json::json!({"command": "body sample", "seed": seed, "count": count, "version": env!("CARGO_PKG_VERSION")}),
+                )?,
             )?;
             let dir = stage.commit()?;
-            println!("wrote {} bodies and preview.png to {}", meshes.len(), dir.display());
+            println!(
+                "wrote {} bodies and preview.png to {}",
+                meshes.len(),
+                dir.display()
+            );
             Ok(())
         }
     }

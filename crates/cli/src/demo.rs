@@ -43,17 +43,23 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     let capture = Capture::load(&capture_dir).context("the simulated capture does not load")?;
 
     let cfg = ReconConfig::default();
-    let rec = reconstruct(&capture, &model, &prior, &cfg, seed, &bars).context("reconstructing the simulated capture")?;
+    let rec = reconstruct(&capture, &model, &prior, &cfg, seed, &bars)
+        .context("reconstructing the simulated capture")?;
     bars.stage("writing results", 0);
     let written = crate::result::write(&stage, "", &capture, &rec, &model, &prior)?;
     for ext in ["ply", "obj", "glb"] {
-        sim.body.mesh.write(&stage.path(&format!("person_truth.{ext}")))?;
+        sim.body
+            .mesh
+            .write(&stage.path(&format!("person_truth.{ext}")))?;
     }
 
     // Evaluation (the truth is read only here).
     let best = &written.best;
     let eval = crate::evaluate::evaluate(&sim, best, &written.fitted_mask, &rec.objects)?;
-    write_text(&stage.path("eval.json"), &serde_json::to_string_pretty(&eval)?)?;
+    write_text(
+        &stage.path("eval.json"),
+        &serde_json::to_string_pretty(&eval)?,
+    )?;
     let view = crate::evaluate::third_view(&sim, &model, best, &rec.objects)?;
     save_png(&view, &stage.path("views/third_camera.png"))?;
 
@@ -65,13 +71,29 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
         seed,
         preset: "tabletop",
         thermal_camera: "lepton",
-        body_asset: format!("built-in, rank {}, {} influences", model.rank(), model.asset.influences),
+        body_asset: format!(
+            "built-in, rank {}, {} influences",
+            model.rank(),
+            model.asset.influences
+        ),
         config: &cfg,
         scene: "capture/truth/scene.toml",
     };
     write_text(&stage.path("run.toml"), &toml::to_string(&record)?)?;
-    let objects: Vec<&str> = capture.objects.iter().map(|o| o.category.as_str()).collect();
-    let html = report_html(seed, &scene_text, &sim.report, &objects, &sim, &eval, &crate::result::report_section("", &capture, &rec));
+    let objects: Vec<&str> = capture
+        .objects
+        .iter()
+        .map(|o| o.category.as_str())
+        .collect();
+    let html = report_html(
+        seed,
+        &scene_text,
+        &sim.report,
+        &objects,
+        &sim,
+        &eval,
+        &crate::result::report_section("", &capture, &rec),
+    );
     write_text(&stage.path("report.html"), &html)?;
     bars.finish();
     let dir = stage.commit()?;
@@ -92,11 +114,22 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
         f(eval.mpjpe_m),
         eval.reflection_iou
     );
-    println!("wrote {} in {seconds:.1} s (open report.html)", dir.display());
+    println!(
+        "wrote {} in {seconds:.1} s (open report.html)",
+        dir.display()
+    );
     Ok(())
 }
 
-fn report_html(seed: u64, scene: &str, r: &irmirror_sim::SimReport, objects: &[&str], sim: &irmirror_sim::Simulation, e: &Evaluation, recon: &str) -> String {
+fn report_html(
+    seed: u64,
+    scene: &str,
+    r: &irmirror_sim::SimReport,
+    objects: &[&str],
+    sim: &irmirror_sim::Simulation,
+    e: &Evaluation,
+    recon: &str,
+) -> String {
     let p = &sim.scene.person;
     let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     format!(
@@ -143,8 +176,18 @@ reflection, from the capture alone; the simulator's truth is used only for the e
         k3 = f(e.keypoints_3d_normalised),
         mpjpe = f(e.mpjpe_m),
         iou = e.reflection_iou,
-        terr = e.object_translation_error_m.iter().map(|x| format!("{:.1}", x * 1e3)).collect::<Vec<_>>().join(", "),
-        serr = e.object_scale_error_pct.iter().map(|x| format!("{x:.1}")).collect::<Vec<_>>().join(", "),
+        terr = e
+            .object_translation_error_m
+            .iter()
+            .map(|x| format!("{:.1}", x * 1e3))
+            .collect::<Vec<_>>()
+            .join(", "),
+        serr = e
+            .object_scale_error_pct
+            .iter()
+            .map(|x| format!("{x:.1}"))
+            .collect::<Vec<_>>()
+            .join(", "),
         px = r.reflection_pixels,
         c = r.reflection_contrast_k,
         m = r.reflection_mean_rise_k,

@@ -131,7 +131,12 @@ pub fn captures(set: Set) -> Vec<(String, &'static str, u64, f64)> {
                 Set::Quick => 50.0,
                 Set::Full => [30.0, 50.0, 80.0][i % 3],
             };
-            out.push((format!("{cat}_{i:02}"), *cat, SEED_BASE + 1000 * c as u64 + i as u64, netd));
+            out.push((
+                format!("{cat}_{i:02}"),
+                *cat,
+                SEED_BASE + 1000 * c as u64 + i as u64,
+                netd,
+            ));
         }
     }
     out
@@ -140,7 +145,13 @@ pub fn captures(set: Set) -> Vec<(String, &'static str, u64, f64)> {
 /// The scene of a capture: the car preset, or the tabletop preset keeping only objects of the
 /// category (mugs: a lower rig and the Boson-like camera), redrawn until the reflection shows
 /// (≥ 12 px with an ideal sensor).
-pub fn scene(model: &BodyModel, category: &str, seed: u64, netd_mk: f64, first_attempt: u64) -> Result<(SceneFile, u64)> {
+pub fn scene(
+    model: &BodyModel,
+    category: &str,
+    seed: u64,
+    netd_mk: f64,
+    first_attempt: u64,
+) -> Result<(SceneFile, u64)> {
     for attempt in first_attempt..ATTEMPTS {
         let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
         let phenotype = irmirror_sim::people::random_phenotype(&mut rng);
@@ -148,7 +159,8 @@ pub fn scene(model: &BodyModel, category: &str, seed: u64, netd_mk: f64, first_a
         let mut scene = if category == "car" {
             irmirror_sim::scene::car(&mut rng, pose, phenotype, ThermalPreset::Lepton)
         } else {
-            let mut sc = irmirror_sim::scene::tabletop(&mut rng, pose, phenotype, ThermalPreset::Lepton);
+            let mut sc =
+                irmirror_sim::scene::tabletop(&mut rng, pose, phenotype, ThermalPreset::Lepton);
             sc.objects.retain(|o| o.shape.category() == category);
             if category == "mug" && !sc.objects.is_empty() {
                 // A mug's side reflects near-horizontal rays only: from the preset's camera
@@ -157,9 +169,16 @@ pub fn scene(model: &BodyModel, category: &str, seed: u64, netd_mk: f64, first_a
                 // small convex mirror: the person covers 1–3 Lepton pixels, so mug scenes use
                 // the Boson-like 640×512 camera.
                 let n = sc.objects.len() as f64;
-                let (cx, cy) = (sc.objects.iter().map(|o| o.base_m[0]).sum::<f64>() / n, sc.objects.iter().map(|o| o.base_m[1]).sum::<f64>() / n);
-                let pose = irmirror_sim::scene::look_at(Vector3::new(cx, cy + 0.4, 0.95), Vector3::new(cx, cy, 0.8));
-                sc.depth_camera.world_from_camera = irmirror_geom::transform::RigidFile::from_rigid(&pose);
+                let (cx, cy) = (
+                    sc.objects.iter().map(|o| o.base_m[0]).sum::<f64>() / n,
+                    sc.objects.iter().map(|o| o.base_m[1]).sum::<f64>() / n,
+                );
+                let pose = irmirror_sim::scene::look_at(
+                    Vector3::new(cx, cy + 0.4, 0.95),
+                    Vector3::new(cx, cy, 0.8),
+                );
+                sc.depth_camera.world_from_camera =
+                    irmirror_geom::transform::RigidFile::from_rigid(&pose);
                 sc.thermal_camera.intrinsics = ThermalPreset::Boson.camera();
             }
             sc
@@ -169,12 +188,16 @@ pub fn scene(model: &BodyModel, category: &str, seed: u64, netd_mk: f64, first_a
         }
         let mut probe = scene.clone();
         probe.sensor = Sensor::ideal();
-        if irmirror_sim::simulate::reflection_pixels(model, &probe)? >= irmirror_sim::presets::MIN_REFLECTION_PIXELS {
+        if irmirror_sim::simulate::reflection_pixels(model, &probe)?
+            >= irmirror_sim::presets::MIN_REFLECTION_PIXELS
+        {
             scene.sensor.netd_mk = netd_mk;
             return Ok((scene, attempt));
         }
     }
-    anyhow::bail!("no {category} scene with a visible reflection from seed {seed} in {ATTEMPTS} draws")
+    anyhow::bail!(
+        "no {category} scene with a visible reflection from seed {seed} in {ATTEMPTS} draws"
+    )
 }
 
 /// Scene draws tried per capture (single-category tabletop scenes reflect the person less often).
@@ -200,7 +223,10 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
     if let Some(c) = &selection.category
         && !CATEGORIES.contains(&c.as_str())
     {
-        bail!("--category {c}: the benchmark has {}", CATEGORIES.join(", "));
+        bail!(
+            "--category {c}: the benchmark has {}",
+            CATEGORIES.join(", ")
+        );
     }
     let model = BodyModel::builtin()?;
     let prior = PosePrior::builtin(candle_core::DType::F64)?;
@@ -208,14 +234,32 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
     let mut list = captures(set);
     if let Some(l) = selection.limit {
         let per = list.len() / CATEGORIES.len();
-        list = list.into_iter().enumerate().filter(|(k, _)| k % per < l).map(|(_, c)| c).collect();
+        list = list
+            .into_iter()
+            .enumerate()
+            .filter(|(k, _)| k % per < l)
+            .map(|(_, c)| c)
+            .collect();
     }
     if let Some(c) = &selection.category {
         list.retain(|x| x.1 == c.as_str());
     }
-    let variants: Vec<(&str, Option<Ablation>)> = VARIANTS.iter().copied().filter(|v| !selection.full_only || v.1.is_none()).collect();
-    let bar = if progress { indicatif::ProgressBar::new((list.len() * variants.len()) as u64) } else { indicatif::ProgressBar::hidden() };
-    bar.set_style(indicatif::ProgressStyle::with_template("eval {bar:40} {pos}/{len} runs {msg} {elapsed}/{eta}").expect("valid template"));
+    let variants: Vec<(&str, Option<Ablation>)> = VARIANTS
+        .iter()
+        .copied()
+        .filter(|v| !selection.full_only || v.1.is_none())
+        .collect();
+    let bar = if progress {
+        indicatif::ProgressBar::new((list.len() * variants.len()) as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "eval {bar:40} {pos}/{len} runs {msg} {elapsed}/{eta}",
+        )
+        .expect("valid template"),
+    );
     let scratch = stage.path("scratch");
     let mut results = Vec::new();
     for (id, category, seed, netd) in &list {
@@ -229,7 +273,8 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
             let sim = irmirror_sim::simulate(&model, &sc, *seed)?;
             let dir = scratch.join(id);
             sim.write(&model, &dir, *seed)?;
-            let capture = Capture::load(&dir).with_context(|| format!("{id}: the simulated capture does not load"))?;
+            let capture = Capture::load(&dir)
+                .with_context(|| format!("{id}: the simulated capture does not load"))?;
             std::fs::remove_dir_all(&dir).ok();
             let t0 = Instant::now();
             match preprocess(&capture, &cfg.preprocess) {
@@ -257,24 +302,55 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
             Ok(o) => o,
             Err(e) => {
                 tracing::warn!("{id}: stage 1 failed: {e}");
-                let failed = VariantResult { eval: None, error: Some(format!("stage 1: {e}")), time_s: 0.0 };
-                result.variants = variants.iter().map(|(n, _)| (n.to_string(), failed.clone())).collect();
+                let failed = VariantResult {
+                    eval: None,
+                    error: Some(format!("stage 1: {e}")),
+                    time_s: 0.0,
+                };
+                result.variants = variants
+                    .iter()
+                    .map(|(n, _)| (n.to_string(), failed.clone()))
+                    .collect();
                 bar.inc(variants.len() as u64);
                 results.push(result);
                 continue;
             }
         };
-        result.object_chamfer_mm2 = objects.objects.iter().zip(&sim.object_meshes).map(|(o, m)| Ok(chamfer_mm2(&crate::result::object_mesh(o)?, m))).collect::<Result<_>>()?;
+        result.object_chamfer_mm2 = objects
+            .objects
+            .iter()
+            .zip(&sim.object_meshes)
+            .map(|(o, m)| Ok(chamfer_mm2(&crate::result::object_mesh(o)?, m)))
+            .collect::<Result<_>>()?;
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs)?;
         for &(name, ablation) in &variants {
-            let cfg = ReconConfig { ablate: ablation.into_iter().collect(), ..ReconConfig::default() };
+            let cfg = ReconConfig {
+                ablate: ablation.into_iter().collect(),
+                ..ReconConfig::default()
+            };
             let t0 = Instant::now();
-            let rec = match reconstruct_human(&capture, pre.clone(), objects.clone(), &model, &prior, &cfg, *seed, &Silent) {
+            let rec = match reconstruct_human(
+                &capture,
+                pre.clone(),
+                objects.clone(),
+                &model,
+                &prior,
+                &cfg,
+                *seed,
+                &Silent,
+            ) {
                 Ok(r) => r,
                 Err(e) => {
                     tracing::warn!("{id}: stage 2 ({name}) failed: {e}");
-                    result.variants.insert(name.to_string(), VariantResult { eval: None, error: Some(e.to_string()), time_s: t0.elapsed().as_secs_f64() });
+                    result.variants.insert(
+                        name.to_string(),
+                        VariantResult {
+                            eval: None,
+                            error: Some(e.to_string()),
+                            time_s: t0.elapsed().as_secs_f64(),
+                        },
+                    );
                     bar.inc(1);
                     continue;
                 }
@@ -284,20 +360,42 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
             let mask = fitted_mask(&model, &rec.rays, &body);
             let eval = Some(evaluate(&sim, &body, &mask, &rec.objects)?);
             if ablation.is_none() {
-                save_png(&crate::result::overlay(&rec.pre.rise_k, &rec.pre.mask, &mask), &thumbs.join("overlay.png"))?;
+                save_png(
+                    &crate::result::overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
+                    &thumbs.join("overlay.png"),
+                )?;
                 let view = crate::evaluate::third_view(&sim, &model, &body, &rec.objects)?;
-                save_png(&image::imageops::thumbnail(&view, 160, 120), &thumbs.join("third.png"))?;
+                save_png(
+                    &image::imageops::thumbnail(&view, 160, 120),
+                    &thumbs.join("third.png"),
+                )?;
             }
-            result.variants.insert(name.to_string(), VariantResult { eval, error: None, time_s });
+            result.variants.insert(
+                name.to_string(),
+                VariantResult {
+                    eval,
+                    error: None,
+                    time_s,
+                },
+            );
             bar.inc(1);
         }
         // Random baseline: true root position and orientation, random pose latents.
         let mut rng = irmirror_geom::rng::seeded(*seed, 99);
-        let truth_root = sim.body.depth_from_anny.rotation * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0]));
+        let truth_root = sim.body.depth_from_anny.rotation
+            * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(
+                sc.person.rotvec_rad[0],
+            ));
         let rays = irmirror_recon::pipeline::reflected_rays(&capture, &objects, &pre.mask, &cfg);
         for _ in 0..RANDOM_DRAWS {
-            let latent: Vec<f64> = (0..irmirror_body::prior::LATENT).map(|_| StandardNormal.sample(&mut rng)).collect();
-            let st = HumanState { translation: sim.body.joints[0], rotation: truth_root, latent };
+            let latent: Vec<f64> = (0..irmirror_body::prior::LATENT)
+                .map(|_| StandardNormal.sample(&mut rng))
+                .collect();
+            let st = HumanState {
+                translation: sim.body.joints[0],
+                rotation: truth_root,
+                latent,
+            };
             let body = posed_body(&model, &prior, &st)?;
             let mask = fitted_mask(&model, &rays, &body);
             result.random.push(evaluate(&sim, &body, &mask, &objects)?);
@@ -306,12 +404,24 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
     }
     bar.finish_and_clear();
     std::fs::remove_dir_all(&scratch).ok();
-    let report = Report { set, version: env!("CARGO_PKG_VERSION").into(), captures: results };
+    let report = Report {
+        set,
+        version: env!("CARGO_PKG_VERSION").into(),
+        captures: results,
+    };
     let table = markdown_table(&report);
-    write_text(&stage.path("results.json"), &serde_json::to_string_pretty(&report)?)?;
+    write_text(
+        &stage.path("results.json"),
+        &serde_json::to_string_pretty(&report)?,
+    )?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    write_text(&stage.path("run.toml"), &toml::to_string(&serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "category": selection.category.clone().unwrap_or_else(|| "all".into()), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS }))?)?;
+    write_text(
+        &stage.path("run.toml"),
+        &toml::to_string(
+            &serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "category": selection.category.clone().unwrap_or_else(|| "all".into()), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS }),
+        )?,
+    )?;
     let dir = stage.commit()?;
     println!("{table}");
     println!("wrote {} (open report.html)", dir.display());
@@ -336,13 +446,22 @@ pub fn markdown_table(r: &Report) -> String {
     s.push('\n');
     for (metric, get) in METRICS {
         for cat in CATEGORIES {
-            let caps: Vec<&CaptureResult> = r.captures.iter().filter(|c| c.category == cat).collect();
+            let caps: Vec<&CaptureResult> =
+                r.captures.iter().filter(|c| c.category == cat).collect();
             if caps.is_empty() {
                 continue;
             }
             s.push_str(&format!("| {metric} | {cat} | {} |", caps.len()));
             for (name, _) in VARIANTS {
-                let v: Vec<f64> = caps.iter().filter_map(|c| c.variants.get(name).and_then(|x| x.eval.as_ref()).and_then(get)).collect();
+                let v: Vec<f64> = caps
+                    .iter()
+                    .filter_map(|c| {
+                        c.variants
+                            .get(name)
+                            .and_then(|x| x.eval.as_ref())
+                            .and_then(get)
+                    })
+                    .collect();
                 s.push_str(&format!(" {} |", cell(&v)));
             }
             // Random: the per-capture mean over draws, then the mean over captures.
@@ -361,13 +480,21 @@ pub fn markdown_table(r: &Report) -> String {
         if caps.is_empty() {
             continue;
         }
-        s.push_str(&format!("| failed reconstructions | {cat} | {} |", caps.len()));
+        s.push_str(&format!(
+            "| failed reconstructions | {cat} | {} |",
+            caps.len()
+        ));
         for (name, _) in VARIANTS {
             // A variant left out (`--full-only`) did not fail: it did not run.
             if caps.iter().all(|c| !c.variants.contains_key(name)) {
                 s.push_str(" – |");
             } else {
-                s.push_str(&format!(" {} |", caps.iter().filter(|c| c.variants.get(name).is_some_and(|v| v.eval.is_none())).count()));
+                s.push_str(&format!(
+                    " {} |",
+                    caps.iter()
+                        .filter(|c| c.variants.get(name).is_some_and(|v| v.eval.is_none()))
+                        .count()
+                ));
             }
         }
         s.push_str(" – |\n");
@@ -380,12 +507,35 @@ pub fn markdown_table(r: &Report) -> String {
         }
         let full = |c: &&CaptureResult| c.variants.get("full model").cloned();
         let full_eval = |c: &&CaptureResult| full(c).and_then(|v| v.eval);
-        let t: Vec<f64> = caps.iter().filter_map(full_eval).flat_map(|e| e.object_translation_error_m.iter().map(|x| x * 1e3).collect::<Vec<_>>()).collect();
-        let sc: Vec<f64> = caps.iter().filter_map(full_eval).flat_map(|e| e.object_scale_error_pct).collect();
-        let ch: Vec<f64> = caps.iter().flat_map(|c| c.object_chamfer_mm2.clone()).collect();
+        let t: Vec<f64> = caps
+            .iter()
+            .filter_map(full_eval)
+            .flat_map(|e| {
+                e.object_translation_error_m
+                    .iter()
+                    .map(|x| x * 1e3)
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let sc: Vec<f64> = caps
+            .iter()
+            .filter_map(full_eval)
+            .flat_map(|e| e.object_scale_error_pct)
+            .collect();
+        let ch: Vec<f64> = caps
+            .iter()
+            .flat_map(|c| c.object_chamfer_mm2.clone())
+            .collect();
         let t1: Vec<f64> = caps.iter().map(|c| c.objects_time_s).collect();
         let t2: Vec<f64> = caps.iter().filter_map(full).map(|v| v.time_s).collect();
-        s.push_str(&format!("| {cat} | {} | {} | {} | {} | {} |\n", cell(&t), cell(&sc), cell(&ch), cell(&t1), cell(&t2)));
+        s.push_str(&format!(
+            "| {cat} | {} | {} | {} | {} | {} |\n",
+            cell(&t),
+            cell(&sc),
+            cell(&ch),
+            cell(&t1),
+            cell(&t2)
+        ));
     }
     s
 }
@@ -410,7 +560,15 @@ fn html(r: &Report, table: &str) -> String {
     let table_html: String = table
         .lines()
         .filter(|l| l.starts_with('|') && !l.starts_with("|---"))
-        .map(|l| format!("<tr>{}</tr>\n", l.trim_matches('|').split('|').map(|c| format!("<td>{}</td>", c.trim())).collect::<String>()))
+        .map(|l| {
+            format!(
+                "<tr>{}</tr>\n",
+                l.trim_matches('|')
+                    .split('|')
+                    .map(|c| format!("<td>{}</td>", c.trim()))
+                    .collect::<String>()
+            )
+        })
         .collect();
     format!(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>irmirror eval ({:?})</title>\
@@ -462,24 +620,47 @@ mod tests {
                     .map(|(n, a)| {
                         // One failure: the full model on the last capture.
                         let failed = a.is_none() && k == 2;
-                        (n.to_string(), VariantResult { eval: (!failed).then(|| eval(k as f64)), error: failed.then(|| "x".to_string()), time_s: 1.0 })
+                        (
+                            n.to_string(),
+                            VariantResult {
+                                eval: (!failed).then(|| eval(k as f64)),
+                                error: failed.then(|| "x".to_string()),
+                                time_s: 1.0,
+                            },
+                        )
                     })
                     .collect(),
                 random: vec![eval(1.0), eval(3.0)],
             })
             .collect();
-        let r = Report { set: Set::Quick, version: "x".into(), captures };
+        let r = Report {
+            set: Set::Quick,
+            version: "x".into(),
+            captures,
+        };
         let json = serde_json::to_string(&r).unwrap();
         assert_eq!(serde_json::from_str::<Report>(&json).unwrap(), r);
         let t = markdown_table(&r);
         // Values 0, 1, 2: mean 1, sd 1, t(2) 4.303 → ± 2.484; random: mean of (1 + 3)/2 = 2.
-        assert!(t.contains("| root error (m) | mug | 3 | 1.000 ± 2.484 |"), "{t}");
+        assert!(
+            t.contains("| root error (m) | mug | 3 | 1.000 ± 2.484 |"),
+            "{t}"
+        );
         // The full model failed once: its mean is over the two others (0, 1), and it is counted.
         assert!(t.contains("| 0.500 ± 6.353 | 2.000 ± 0.000 |"), "{t}");
-        assert!(t.contains("| failed reconstructions | mug | 3 | 0 | 0 | 0 | 1 | – |"), "{t}");
+        assert!(
+            t.contains("| failed reconstructions | mug | 3 | 0 | 0 | 0 | 1 | – |"),
+            "{t}"
+        );
         assert!(t.contains("2.000 ± 0.000 |"), "{t}");
-        assert!(t.contains("| 3-D keypoints, normalised | mug | 3 | n/a |"), "{t}");
-        assert!(!t.contains("| bowl |"), "rows without captures are left out");
+        assert!(
+            t.contains("| 3-D keypoints, normalised | mug | 3 | n/a |"),
+            "{t}"
+        );
+        assert!(
+            !t.contains("| bowl |"),
+            "rows without captures are left out"
+        );
         assert!(html(&r, &t).contains("captures/mug_02/overlay.png"));
     }
 
@@ -487,6 +668,9 @@ mod tests {
     fn benchmark_sets_are_fixed() {
         assert_eq!(captures(Set::Quick).len(), 12);
         assert_eq!(captures(Set::Full).len(), 180);
-        assert_eq!(captures(Set::Quick)[4], ("mug_00".to_string(), "mug", SEED_BASE + 1000, 50.0));
+        assert_eq!(
+            captures(Set::Quick)[4],
+            ("mug_00".to_string(), "mug", SEED_BASE + 1000, 50.0)
+        );
     }
 }

@@ -9,9 +9,9 @@ mod eval_cmd;
 mod evaluate;
 mod output;
 mod prior_cmd;
-mod sdf_cmd;
 mod reconstruct_cmd;
 mod result;
+mod sdf_cmd;
 mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
@@ -192,7 +192,14 @@ enum Command {
     },
 }
 
-fn simulate(preset: simulate_cmd::Preset, scene: Option<PathBuf>, thermal: simulate_cmd::Thermal, shapes: simulate_cmd::ShapeSet, out: &std::path::Path, seed: u64) -> anyhow::Result<()> {
+fn simulate(
+    preset: simulate_cmd::Preset,
+    scene: Option<PathBuf>,
+    thermal: simulate_cmd::Thermal,
+    shapes: simulate_cmd::ShapeSet,
+    out: &std::path::Path,
+    seed: u64,
+) -> anyhow::Result<()> {
     let model = irmirror_body::BodyModel::builtin()?;
     let scene = match scene {
         Some(p) => simulate_cmd::load_scene(&p)?,
@@ -208,7 +215,11 @@ fn simulate(preset: simulate_cmd::Preset, scene: Option<PathBuf>, thermal: simul
         r.reflection_pixels,
         r.reflection_contrast_k,
         r.reflection_mean_rise_k,
-        if r.person_directly_visible { "; the person is also directly visible" } else { "; the person is outside both cameras' view" }
+        if r.person_directly_visible {
+            "; the person is also directly visible"
+        } else {
+            "; the person is outside both cameras' view"
+        }
     );
     if r.reflection_pixels == 0 {
         println!("note: no object reflects the person in this capture");
@@ -227,31 +238,109 @@ fn main() -> std::process::ExitCode {
             _ => "trace",
         }
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).without_time().init();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .without_time()
+        .init();
     let progress = !cli.quiet;
     let result = match cli.command {
         Command::Demo { out, seed } => demo::run(&out, seed, progress),
         Command::Body { command } => body_cmd::run(command, progress),
-        Command::Simulate { preset, scene, thermal, shapes, out, seed } => simulate(preset, scene, thermal, shapes, &out, seed),
+        Command::Simulate {
+            preset,
+            scene,
+            thermal,
+            shapes,
+            out,
+            seed,
+        } => simulate(preset, scene, thermal, shapes, &out, seed),
         Command::Bench { command } => bench::run(command),
-        Command::Reconstruct { capture, out, stage, config, ablate, seed } => reconstruct_cmd::run(&capture, &out, stage, config.as_deref(), &ablate, seed, progress),
-        Command::Eval { preset, out, limit, category, full_only } => eval_cmd::run(preset, &out, &eval_cmd::Selection { limit, category, full_only }, progress),
-        Command::TrainSdf { category, meshes, out, seed, shapes, steps, samples, held_out, width } => sdf_cmd::run(
+        Command::Reconstruct {
+            capture,
+            out,
+            stage,
+            config,
+            ablate,
+            seed,
+        } => reconstruct_cmd::run(
+            &capture,
+            &out,
+            stage,
+            config.as_deref(),
+            &ablate,
+            seed,
+            progress,
+        ),
+        Command::Eval {
+            preset,
+            out,
+            limit,
+            category,
+            full_only,
+        } => eval_cmd::run(
+            preset,
+            &out,
+            &eval_cmd::Selection {
+                limit,
+                category,
+                full_only,
+            },
+            progress,
+        ),
+        Command::TrainSdf {
+            category,
+            meshes,
+            out,
+            seed,
+            shapes,
+            steps,
+            samples,
+            held_out,
+            width,
+        } => sdf_cmd::run(
             sdf_cmd::Options {
                 category: &category,
                 meshes: meshes.as_deref(),
                 out: &out,
-                cfg: irmirror_sdf::train::TrainSdfConfig { shapes, steps, samples_per_shape: samples, seed, width, ..Default::default() },
+                cfg: irmirror_sdf::train::TrainSdfConfig {
+                    shapes,
+                    steps,
+                    samples_per_shape: samples,
+                    seed,
+                    width,
+                    ..Default::default()
+                },
                 held_out,
             },
             progress,
         ),
-        Command::TrainPosePrior { out, seed, steps, poses, batch } => {
+        Command::TrainPosePrior {
+            out,
+            seed,
+            steps,
+            poses,
+            batch,
+        } => {
             if steps == 0 || poses < 100 || batch == 0 {
-                Err(anyhow::anyhow!("--steps and --batch must be positive and --poses at least 100"))
+                Err(anyhow::anyhow!(
+                    "--steps and --batch must be positive and --poses at least 100"
+                ))
             } else {
-                prior_cmd::run(&out, irmirror_body::prior::train::TrainConfig { poses, steps, batch, seed, ..Default::default() }, progress)
+                prior_cmd::run(
+                    &out,
+                    irmirror_body::prior::train::TrainConfig {
+                        poses,
+                        steps,
+                        batch,
+                        seed,
+                        ..Default::default()
+                    },
+                    progress,
+                )
             }
         }
     };

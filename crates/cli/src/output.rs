@@ -19,12 +19,19 @@ impl Staging {
     /// Starts writing `target`. An existing `target` is replaced only if it is an earlier result
     /// (it holds `marker`, e.g. `run.toml`) or empty: never a user's file or other directory.
     pub fn new(target: &Path, marker: &str) -> Result<Self> {
-        let name = target.file_name().with_context(|| format!("{} has no directory name", target.display()))?;
+        let name = target
+            .file_name()
+            .with_context(|| format!("{} has no directory name", target.display()))?;
         if target.exists() {
             if !target.is_dir() {
-                anyhow::bail!("{} exists and is not a directory; choose another --out", target.display());
+                anyhow::bail!(
+                    "{} exists and is not a directory; choose another --out",
+                    target.display()
+                );
             }
-            let empty = std::fs::read_dir(target).map(|mut d| d.next().is_none()).unwrap_or(false);
+            let empty = std::fs::read_dir(target)
+                .map(|mut d| d.next().is_none())
+                .unwrap_or(false);
             if !empty && !target.join(marker).exists() {
                 anyhow::bail!(
                     "{} exists and is not an irmirror result (no {marker} in it); choose another --out or remove it",
@@ -36,13 +43,23 @@ impl Staging {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
-        std::fs::create_dir_all(&parent).with_context(|| format!("cannot create {}", parent.display()))?;
-        let tmp = parent.join(format!(".{}.partial-{}", name.to_string_lossy(), std::process::id()));
+        std::fs::create_dir_all(&parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+        let tmp = parent.join(format!(
+            ".{}.partial-{}",
+            name.to_string_lossy(),
+            std::process::id()
+        ));
         if tmp.exists() {
             std::fs::remove_dir_all(&tmp).ok();
         }
-        std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
-        Ok(Self { target: target.to_path_buf(), tmp, committed: false })
+        std::fs::create_dir_all(&tmp)
+            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        Ok(Self {
+            target: target.to_path_buf(),
+            tmp,
+            committed: false,
+        })
     }
 
     /// Path of a file inside the staged directory.
@@ -54,11 +71,13 @@ impl Staging {
     pub fn commit(mut self) -> Result<PathBuf> {
         if self.target.exists() {
             let old = self.tmp.with_extension("old");
-            std::fs::rename(&self.target, &old).with_context(|| format!("cannot replace {}", self.target.display()))?;
+            std::fs::rename(&self.target, &old)
+                .with_context(|| format!("cannot replace {}", self.target.display()))?;
             std::fs::rename(&self.tmp, &self.target)?;
             std::fs::remove_dir_all(&old).ok();
         } else {
-            std::fs::rename(&self.tmp, &self.target).with_context(|| format!("cannot create {}", self.target.display()))?;
+            std::fs::rename(&self.tmp, &self.target)
+                .with_context(|| format!("cannot create {}", self.target.display()))?;
         }
         self.committed = true;
         Ok(self.target.clone())
@@ -85,18 +104,33 @@ pub fn view_left() -> Matrix3<f32> {
 
 /// Renders each mesh from the front (top row) and the left side (bottom row), one column per mesh.
 pub fn preview_sheet(meshes: &[&TriMesh], size: u32) -> RgbImage {
-    let mut sheet = RgbImage::from_pixel(size * meshes.len().max(1) as u32, 2 * size, image::Rgb([255, 255, 255]));
+    let mut sheet = RgbImage::from_pixel(
+        size * meshes.len().max(1) as u32,
+        2 * size,
+        image::Rgb([255, 255, 255]),
+    );
     for (i, m) in meshes.iter().enumerate() {
         let x = i64::from(size) * i as i64;
-        image::imageops::replace(&mut sheet, &render_orthographic(m, &view_front(), size), x, 0);
-        image::imageops::replace(&mut sheet, &render_orthographic(m, &view_left(), size), x, i64::from(size));
+        image::imageops::replace(
+            &mut sheet,
+            &render_orthographic(m, &view_front(), size),
+            x,
+            0,
+        );
+        image::imageops::replace(
+            &mut sheet,
+            &render_orthographic(m, &view_left(), size),
+            x,
+            i64::from(size),
+        );
     }
     sheet
 }
 
 /// Saves a PNG with context.
 pub fn save_png(img: &RgbImage, path: &Path) -> Result<()> {
-    img.save(path).with_context(|| format!("cannot write {}", path.display()))
+    img.save(path)
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// Writes text with context.

@@ -57,8 +57,15 @@ pub struct Bars {
 impl Bars {
     /// Bars on stderr, or hidden.
     pub fn new(show: bool) -> Self {
-        let bar = if show { indicatif::ProgressBar::new(0) } else { indicatif::ProgressBar::hidden() };
-        bar.set_style(indicatif::ProgressStyle::with_template("{msg:24} {bar:30} {pos}/{len} {elapsed}").expect("valid template"));
+        let bar = if show {
+            indicatif::ProgressBar::new(0)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{msg:24} {bar:30} {pos}/{len} {elapsed}")
+                .expect("valid template"),
+        );
         Self { bar }
     }
     /// Clears the bar.
@@ -81,8 +88,10 @@ impl Progress for Bars {
 /// Reads `--config` (TOML, every field optional) and applies the ablations.
 pub fn load_config(config: Option<&Path>, ablate: &[AblateArg]) -> Result<ReconConfig> {
     let mut cfg: ReconConfig = match config {
-        Some(p) => toml::from_str(&std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?)
-            .with_context(|| format!("config {}", p.display()))?,
+        Some(p) => toml::from_str(
+            &std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?,
+        )
+        .with_context(|| format!("config {}", p.display()))?,
         None => ReconConfig::default(),
     };
     for a in ablate {
@@ -95,7 +104,15 @@ pub fn load_config(config: Option<&Path>, ablate: &[AblateArg]) -> Result<ReconC
 }
 
 /// Runs the pipeline up to `stage` on `capture_dir`, writing `out` atomically.
-pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, ablate: &[AblateArg], seed: u64, progress: bool) -> Result<()> {
+pub fn run(
+    capture_dir: &Path,
+    out: &Path,
+    stage: Stage,
+    config: Option<&Path>,
+    ablate: &[AblateArg],
+    seed: u64,
+    progress: bool,
+) -> Result<()> {
     let t0 = Instant::now();
     let cfg = load_config(config, ablate)?;
     let capture = Capture::load(capture_dir)?;
@@ -106,13 +123,24 @@ pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, 
             let st = Staging::new(out, "run.toml")?;
             std::fs::create_dir_all(st.path("debug"))?;
             let max = pre.rise_k.data.iter().copied().fold(1e-9, f64::max);
-            write_gray8_png(&pre.rise_k.map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8), &st.path("debug/rise.png"))?;
+            write_gray8_png(
+                &pre.rise_k
+                    .map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8),
+                &st.path("debug/rise.png"),
+            )?;
             mask_png(&pre.object_pixels, &st.path("debug/object_pixels.png"))?;
             mask_png(&pre.raw_mask, &st.path("debug/mask_raw.png"))?;
             mask_png(&pre.mask, &st.path("reflection_mask.png"))?;
             mask_png(&pre.edges, &st.path("debug/edges.png"))?;
             let n = pre.mask.data.iter().filter(|m| **m).count();
-            write_record(&st, capture_dir, "preprocess", &cfg, seed, serde_json::json!({"threshold_k": pre.threshold_k, "noise_k": pre.noise_k, "reflection_pixels": n}))?;
+            write_record(
+                &st,
+                capture_dir,
+                "preprocess",
+                &cfg,
+                seed,
+                serde_json::json!({"threshold_k": pre.threshold_k, "noise_k": pre.noise_k, "reflection_pixels": n}),
+            )?;
             let dir = st.commit()?;
             println!(
                 "stage 0: {n} reflection pixels (threshold {:.3} K over a noise of {:.3} K) on {} object pixels; wrote {}",
@@ -130,17 +158,42 @@ pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, 
                 let m = crate::result::object_mesh(o)?;
                 m.write(&st.path(&format!("objects/object_{k}.ply")))?;
                 m.write(&st.path(&format!("objects/object_{k}.glb")))?;
-                mask_png(&objs.masks[k], &st.path(&format!("objects/object_{k}_mask.png")))?;
+                mask_png(
+                    &objs.masks[k],
+                    &st.path(&format!("objects/object_{k}_mask.png")),
+                )?;
             }
             let params = serde_json::json!({"frame": "depth camera (OpenCV axes), metres", "support_plane": objs.plane, "objects": objs.objects, "segmented": objs.segmented});
-            write_text(&st.path("objects.json"), &serde_json::to_string_pretty(&params)?)?;
-            write_record(&st, capture_dir, "objects", &cfg, seed, serde_json::json!({}))?;
+            write_text(
+                &st.path("objects.json"),
+                &serde_json::to_string_pretty(&params)?,
+            )?;
+            write_record(
+                &st,
+                capture_dir,
+                "objects",
+                &cfg,
+                seed,
+                serde_json::json!({}),
+            )?;
             let dir = st.commit()?;
             for (k, o) in objs.objects.iter().enumerate() {
                 let t = o.depth_from_object.translation;
-                println!("object {k}: {:?} at ({:.3}, {:.3}, {:.3}) m, scale {:.3} m, mean surface error {:.1} mm", o.shape, t.x, t.y, t.z, o.depth_from_object.scale, o.mean_surface_error_m * 1e3);
+                println!(
+                    "object {k}: {:?} at ({:.3}, {:.3}, {:.3}) m, scale {:.3} m, mean surface error {:.1} mm",
+                    o.shape,
+                    t.x,
+                    t.y,
+                    t.z,
+                    o.depth_from_object.scale,
+                    o.mean_surface_error_m * 1e3
+                );
             }
-            println!("wrote {} in {:.1} s", dir.display(), t0.elapsed().as_secs_f64());
+            println!(
+                "wrote {} in {:.1} s",
+                dir.display(),
+                t0.elapsed().as_secs_f64()
+            );
         }
         Stage::Full => {
             let model = BodyModel::builtin()?;
@@ -171,19 +224,34 @@ pub fn run(capture_dir: &Path, out: &Path, stage: Stage, config: Option<&Path>, 
 /// One-paragraph summary of a reconstruction.
 pub fn print_summary(rec: &Reconstruction) {
     let n = rec.pre.mask.data.iter().filter(|m| **m).count();
-    println!("stage 0: {n} reflection pixels (threshold {:.3} K)", rec.pre.threshold_k);
+    println!(
+        "stage 0: {n} reflection pixels (threshold {:.3} K)",
+        rec.pre.threshold_k
+    );
     for (k, o) in rec.objects.objects.iter().enumerate() {
-        println!("stage 1: object {k}: {:?}, scale {:.3} m, mean surface error {:.1} mm", o.shape, o.depth_from_object.scale, o.mean_surface_error_m * 1e3);
+        println!(
+            "stage 1: object {k}: {:?}, scale {:.3} m, mean surface error {:.1} mm",
+            o.shape,
+            o.depth_from_object.scale,
+            o.mean_surface_error_m * 1e3
+        );
     }
     for (k, h) in rec.human.hypotheses.iter().enumerate() {
         let t = h.translation_m;
         println!(
             "stage 2: hypothesis {k}: loss {:.3} (soft IoU {:.2}), root at ({:.2}, {:.2}, {:.2}) m, {:.2} m from the camera",
-            h.loss, h.soft_iou, t[0], t[1], t[2], (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt()
+            h.loss,
+            h.soft_iou,
+            t[0],
+            t[1],
+            t[2],
+            (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt()
         );
     }
     if rec.human.hypotheses.len() > 1 {
-        println!("note: the reflection is ambiguous; distinct hypotheses are listed best first (params.json, report.html)");
+        println!(
+            "note: the reflection is ambiguous; distinct hypotheses are listed best first (params.json, report.html)"
+        );
     }
 }
 
@@ -196,7 +264,14 @@ figure{{display:inline-block;margin:0 1em 1em 0;vertical-align:top}}img{{image-r
     )
 }
 
-fn write_record(st: &Staging, capture_dir: &Path, stage: &str, cfg: &ReconConfig, seed: u64, extra: serde_json::Value) -> Result<()> {
+fn write_record(
+    st: &Staging,
+    capture_dir: &Path,
+    stage: &str,
+    cfg: &ReconConfig,
+    seed: u64,
+    extra: serde_json::Value,
+) -> Result<()> {
     let record = serde_json::json!({
         "command": "reconstruct",
         "version": env!("CARGO_PKG_VERSION"),

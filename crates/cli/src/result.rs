@@ -22,11 +22,21 @@ pub fn object_mesh(obj: &FittedObject) -> Result<TriMesh> {
 }
 
 /// The posed body of a stage-2 state (mean adult shape), depth frame.
-pub fn posed_body(model: &BodyModel, prior: &PosePrior, st: &irmirror_recon::human::HumanState) -> Result<PosedBody<f64>> {
+pub fn posed_body(
+    model: &BodyModel,
+    prior: &PosePrior,
+    st: &irmirror_recon::human::HumanState,
+) -> Result<PosedBody<f64>> {
     let shaped = irmirror_recon::human::mean_adult(model)?;
     let mut rotations = prior.decode(&st.latent)?;
     rotations[0] = st.rotation;
-    Ok(model.pose(&shaped, &irmirror_body::Pose { rotations, translation: st.translation })?)
+    Ok(model.pose(
+        &shaped,
+        &irmirror_body::Pose {
+            rotations,
+            translation: st.translation,
+        },
+    )?)
 }
 
 fn mask_png(img: &Image<bool>, path: &std::path::Path) -> Result<()> {
@@ -56,9 +66,19 @@ pub fn overlay(rise_k: &Image<f64>, observed: &Image<bool>, fitted: &[bool]) -> 
 pub fn plot_curves(curves: &[&[f64]]) -> RgbImage {
     let (w, h, m) = (480u32, 240u32, 20i64);
     let mut img = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    let ymax = curves.iter().flat_map(|c| c.iter()).copied().filter(|v| v.is_finite()).fold(1e-9, f64::max);
+    let ymax = curves
+        .iter()
+        .flat_map(|c| c.iter())
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(1e-9, f64::max);
     let xmax = curves.iter().map(|c| c.len()).max().unwrap_or(1).max(2) - 1;
-    let to_px = |i: usize, v: f64| (m + (i as f64 / xmax as f64 * (w as i64 - 2 * m) as f64) as i64, h as i64 - m - (v / ymax * (h as i64 - 2 * m) as f64) as i64);
+    let to_px = |i: usize, v: f64| {
+        (
+            m + (i as f64 / xmax as f64 * (w as i64 - 2 * m) as f64) as i64,
+            h as i64 - m - (v / ymax * (h as i64 - 2 * m) as f64) as i64,
+        )
+    };
     let mut put = |x: i64, y: i64, c: Rgb<u8>| {
         if x >= 0 && y >= 0 && x < w as i64 && y < h as i64 {
             img.put_pixel(x as u32, y as u32, c);
@@ -71,7 +91,11 @@ pub fn plot_curves(curves: &[&[f64]]) -> RgbImage {
         put(m, y, Rgb([0, 0, 0]));
     }
     for (k, c) in curves.iter().enumerate().rev() {
-        let col = if k == 0 { Rgb([20, 20, 200]) } else { Rgb([180, 180, 180]) };
+        let col = if k == 0 {
+            Rgb([20, 20, 200])
+        } else {
+            Rgb([180, 180, 180])
+        };
         for i in 1..c.len() {
             let ((x0, y0), (x1, y1)) = (to_px(i - 1, c[i - 1]), to_px(i, c[i]));
             let n = (x1 - x0).abs().max((y1 - y0).abs()).max(1);
@@ -94,10 +118,21 @@ pub struct Drawn<'a> {
 }
 
 /// Ray-casts bodies and objects from a calibrated camera (Lambert shading from the eye).
-pub fn render_view(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>, bodies: &[Drawn<'_>], objects: &[PlacedSdf]) -> RgbImage {
+pub fn render_view(
+    camera: &PinholeCamera,
+    depth_from_camera: &Rigid3<f64>,
+    bodies: &[Drawn<'_>],
+    objects: &[PlacedSdf],
+) -> RgbImage {
     use rayon::prelude::*;
-    let bvhs: Vec<Bvh<f64>> = bodies.iter().map(|b| Bvh::build(b.vertices, b.triangles)).collect();
-    let tp = TraceParams { coarse_tol_rel: 1.0 / 256.0, ..TraceParams::default() };
+    let bvhs: Vec<Bvh<f64>> = bodies
+        .iter()
+        .map(|b| Bvh::build(b.vertices, b.triangles))
+        .collect();
+    let tp = TraceParams {
+        coarse_tol_rel: 1.0 / 256.0,
+        ..TraceParams::default()
+    };
     let (w, h) = (camera.width, camera.height);
     let px: Vec<[u8; 3]> = (0..w * h)
         .into_par_iter()
@@ -105,9 +140,13 @@ pub fn render_view(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>, bodi
             let ray = depth_from_camera.transform_ray(&camera.pixel_ray::<f64>(p % w, p / w));
             let mut best: Option<(f64, f64, [u8; 3])> = None;
             for (b, bvh) in bodies.iter().zip(&bvhs) {
-                if let Some((t, tri)) = first_hit(bvh, b.vertices, b.triangles, &ray.origin, &ray.dir) {
+                if let Some((t, tri)) =
+                    first_hit(bvh, b.vertices, b.triangles, &ray.origin, &ray.dir)
+                {
                     let [i, j, k] = b.triangles[tri as usize].map(|x| x as usize);
-                    let n = (b.vertices[j] - b.vertices[i]).cross(&(b.vertices[k] - b.vertices[i])).normalize();
+                    let n = (b.vertices[j] - b.vertices[i])
+                        .cross(&(b.vertices[k] - b.vertices[i]))
+                        .normalize();
                     if best.is_none_or(|x| t < x.0) {
                         best = Some((t, n.dot(&ray.dir).abs(), b.colour));
                     }
@@ -139,7 +178,14 @@ pub struct Written {
 }
 
 /// Writes the reconstruction into `stage` under `prefix` (e.g. "" or "result/").
-pub fn write(stage: &Staging, prefix: &str, capture: &Capture, rec: &Reconstruction, model: &BodyModel, prior: &PosePrior) -> Result<Written> {
+pub fn write(
+    stage: &Staging,
+    prefix: &str,
+    capture: &Capture,
+    rec: &Reconstruction,
+    model: &BodyModel,
+    prior: &PosePrior,
+) -> Result<Written> {
     let p = |name: &str| stage.path(&format!("{prefix}{name}"));
     for d in ["debug", "objects", "hypotheses", "views"] {
         std::fs::create_dir_all(p(d))?;
@@ -147,7 +193,11 @@ pub fn write(stage: &Staging, prefix: &str, capture: &Capture, rec: &Reconstruct
     // Stage 0.
     let pre = &rec.pre;
     let max = pre.rise_k.data.iter().copied().fold(1e-9, f64::max);
-    write_gray8_png(&pre.rise_k.map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8), &p("debug/rise.png"))?;
+    write_gray8_png(
+        &pre.rise_k
+            .map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8),
+        &p("debug/rise.png"),
+    )?;
     mask_png(&pre.object_pixels, &p("debug/object_pixels.png"))?;
     mask_png(&pre.raw_mask, &p("debug/mask_raw.png"))?;
     mask_png(&pre.edges, &p("debug/edges.png"))?;
@@ -157,7 +207,10 @@ pub fn write(stage: &Staging, prefix: &str, capture: &Capture, rec: &Reconstruct
         let m = object_mesh(o)?;
         m.write(&p(&format!("objects/object_{k}.ply")))?;
         m.write(&p(&format!("objects/object_{k}.glb")))?;
-        mask_png(&rec.objects.masks[k], &p(&format!("debug/object_{k}_mask.png")))?;
+        mask_png(
+            &rec.objects.masks[k],
+            &p(&format!("debug/object_{k}_mask.png")),
+        )?;
     }
     // Stage 2.
     let mut bodies = Vec::new();
@@ -172,25 +225,62 @@ pub fn write(stage: &Staging, prefix: &str, capture: &Capture, rec: &Reconstruct
         mesh.write(&p(&format!("hypotheses/body_{k}.ply")))?;
         bodies.push(posed);
     }
-    let best = bodies.first().cloned().ok_or_else(|| anyhow::anyhow!("no hypothesis"))?;
+    let best = bodies
+        .first()
+        .cloned()
+        .ok_or_else(|| anyhow::anyhow!("no hypothesis"))?;
     let bvh = Bvh::build(&best.vertices, &model.asset.faces);
     let fitted_mask = hard_mask(&rec.rays, &bvh, &best.vertices, &model.asset.faces);
-    save_png(&overlay(&pre.rise_k, &pre.mask, &fitted_mask), &p("overlay.png"))?;
-    let curves: Vec<&[f64]> = rec.human.hypotheses.iter().map(|h| h.loss_curve.as_slice()).collect();
+    save_png(
+        &overlay(&pre.rise_k, &pre.mask, &fitted_mask),
+        &p("overlay.png"),
+    )?;
+    let curves: Vec<&[f64]> = rec
+        .human
+        .hypotheses
+        .iter()
+        .map(|h| h.loss_curve.as_slice())
+        .collect();
     save_png(&plot_curves(&curves), &p("loss_curve.png"))?;
     let placed = rec.objects.placed();
     let faces = &model.asset.faces;
     for (name, cam, depth_from_cam) in &capture.extra_cameras {
-        let img = render_view(cam, depth_from_cam, &[Drawn { vertices: &best.vertices, triangles: faces, colour: [240, 150, 60] }], &placed);
+        let img = render_view(
+            cam,
+            depth_from_cam,
+            &[Drawn {
+                vertices: &best.vertices,
+                triangles: faces,
+                colour: [240, 150, 60],
+            }],
+            &placed,
+        );
         save_png(&img, &p(&format!("views/{name}.png")))?;
     }
     // The depth camera's own view, pulled back 1.5 m so the person shows too.
-    let centre = placed.iter().fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation) / placed.len().max(1) as f64;
+    let centre = placed
+        .iter()
+        .fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation)
+        / placed.len().max(1) as f64;
     let overview = overview_camera(&rec.objects.plane.n(), &centre, &best);
-    let img = render_view(&overview.0, &overview.1, &[Drawn { vertices: &best.vertices, triangles: faces, colour: [240, 150, 60] }], &placed);
+    let img = render_view(
+        &overview.0,
+        &overview.1,
+        &[Drawn {
+            vertices: &best.vertices,
+            triangles: faces,
+            colour: [240, 150, 60],
+        }],
+        &placed,
+    );
     save_png(&img, &p("views/overview.png"))?;
 
-    let decoded: Vec<Vec<[f64; 3]>> = rec.human.hypotheses.iter().map(|h| prior.decode_axis_angles(&h.latent)).collect::<Result<_, _>>()?;
+    let decoded: Vec<Vec<[f64; 3]>> = rec
+        .human
+        .hypotheses
+        .iter()
+        .map(|h| prior.decode_axis_angles(&h.latent))
+        .collect::<Result<_, _>>()?;
     let params = serde_json::json!({
         "frame": "depth camera (OpenCV axes: +X right, +Y down, +Z forward), metres",
         "support_plane": rec.objects.plane,
@@ -212,20 +302,33 @@ pub fn write(stage: &Staging, prefix: &str, capture: &Capture, rec: &Reconstruct
 
 /// A camera beside the scene, level with the support plane, that sees the objects and the
 /// fitted person.
-fn overview_camera(up: &Vector3<f64>, objects_centre: &Vector3<f64>, body: &PosedBody<f64>) -> (PinholeCamera, Rigid3<f64>) {
+fn overview_camera(
+    up: &Vector3<f64>,
+    objects_centre: &Vector3<f64>,
+    body: &PosedBody<f64>,
+) -> (PinholeCamera, Rigid3<f64>) {
     let cam = PinholeCamera::from_fov(320, 240, 70f64.to_radians()).expect("valid");
     let root = body.joints[0];
     let target = (root + objects_centre) * 0.5;
     let span = (root - objects_centre).norm();
     // Look along the horizontal perpendicular to the person–objects line.
     let along = root - objects_centre;
-    let side = up.cross(&along).try_normalize(1e-9).unwrap_or_else(Vector3::x);
+    let side = up
+        .cross(&along)
+        .try_normalize(1e-9)
+        .unwrap_or_else(Vector3::x);
     let eye = target + side * (1.2 * span + 1.5) + up * 0.3;
     let fwd = (target - eye).normalize();
     let right = fwd.cross(up).normalize();
     let down = fwd.cross(&right);
     let rot = irmirror_geom::nalgebra::Matrix3::from_columns(&[right, down, fwd]);
-    (cam, Rigid3 { rotation: rot, translation: eye })
+    (
+        cam,
+        Rigid3 {
+            rotation: rot,
+            translation: eye,
+        },
+    )
 }
 
 /// The report section of a reconstruction (paths relative to the report, under `prefix`).
@@ -239,15 +342,27 @@ pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> 
 "#
     );
     for (name, _, _) in &capture.extra_cameras {
-        s += &format!(r#"<figure><img src="{prefix}views/{name}.png" width="480"><figcaption>fit seen from the capture's camera “{name}”</figcaption></figure>"#);
+        s += &format!(
+            r#"<figure><img src="{prefix}views/{name}.png" width="480"><figcaption>fit seen from the capture's camera “{name}”</figcaption></figure>"#
+        );
     }
     s += "<h3>Objects (stage 1)</h3><table><tr><th>#</th><th>category</th><th>shape</th><th>position (m, depth frame)</th><th>scale (m)</th><th>mean surface error</th><th>mask</th></tr>";
     for (k, o) in rec.objects.objects.iter().enumerate() {
         let t = o.depth_from_object.translation;
         s += &format!(
             "<tr><td>{k}</td><td>{}</td><td>{:?}</td><td>({:.3}, {:.3}, {:.3})</td><td>{:.3}</td><td>{:.1} mm</td><td>{}</td></tr>",
-            o.category, o.shape, t.x, t.y, t.z, o.depth_from_object.scale, o.mean_surface_error_m * 1e3,
-            if rec.objects.segmented[k] { "segmented" } else { "given" }
+            o.category,
+            o.shape,
+            t.x,
+            t.y,
+            t.z,
+            o.depth_from_object.scale,
+            o.mean_surface_error_m * 1e3,
+            if rec.objects.segmented[k] {
+                "segmented"
+            } else {
+                "given"
+            }
         );
     }
     s += "</table>";
@@ -261,7 +376,12 @@ pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> 
         let t = h.translation_m;
         s += &format!(
             "<tr><td>{k}</td><td>{:.3}</td><td>{:.3}</td><td>({:.2}, {:.2}, {:.2})</td><td>{:.2}</td><td><a href=\"{prefix}hypotheses/body_{k}.ply\">body_{k}.ply</a></td></tr>",
-            h.loss, h.soft_iou, t[0], t[1], t[2], Vector3::from(t).norm()
+            h.loss,
+            h.soft_iou,
+            t[0],
+            t[1],
+            t[2],
+            Vector3::from(t).norm()
         );
     }
     s += "</table>";

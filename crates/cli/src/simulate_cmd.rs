@@ -47,12 +47,29 @@ pub enum Thermal {
 
 /// The scene for a preset and seed whose reflection is visible (see
 /// [`irmirror_sim::presets::preset_scene`]).
-pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: Thermal, seed: u64) -> Result<SceneFile> {
-    preset_scene_with(model, preset, thermal, irmirror_sim::presets::Shapes::Simple, seed)
+pub fn preset_scene(
+    model: &BodyModel,
+    preset: Preset,
+    thermal: Thermal,
+    seed: u64,
+) -> Result<SceneFile> {
+    preset_scene_with(
+        model,
+        preset,
+        thermal,
+        irmirror_sim::presets::Shapes::Simple,
+        seed,
+    )
 }
 
 /// [`preset_scene`] with the objects drawn from `shapes`.
-pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: Thermal, shapes: irmirror_sim::presets::Shapes, seed: u64) -> Result<SceneFile> {
+pub fn preset_scene_with(
+    model: &BodyModel,
+    preset: Preset,
+    thermal: Thermal,
+    shapes: irmirror_sim::presets::Shapes,
+    seed: u64,
+) -> Result<SceneFile> {
     let p = match preset {
         Preset::Tabletop => irmirror_sim::presets::Preset::Tabletop,
         Preset::Car => irmirror_sim::presets::Preset::Car,
@@ -61,11 +78,18 @@ pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: Thermal, sh
         Thermal::Lepton => ThermalPreset::Lepton,
         Thermal::Boson => ThermalPreset::Boson,
     };
-    Ok(irmirror_sim::presets::preset_scene_with(model, p, t, shapes, seed)?)
+    Ok(irmirror_sim::presets::preset_scene_with(
+        model, p, t, shapes, seed,
+    )?)
 }
 
 /// Simulates into `out` (atomically) and returns the figures.
-pub fn run(model: &BodyModel, scene: &SceneFile, out: &Path, seed: u64) -> Result<(SimReport, PathBuf)> {
+pub fn run(
+    model: &BodyModel,
+    scene: &SceneFile,
+    out: &Path,
+    seed: u64,
+) -> Result<(SimReport, PathBuf)> {
     let stage = Staging::new(out, "capture.toml")?;
     let sim = simulate(model, scene, seed)?;
     sim.write(model, &stage.path(""), seed)?;
@@ -75,6 +99,7 @@ pub fn run(model: &BodyModel, scene: &SceneFile, out: &Path, seed: u64) -> Resul
 
 /// Loads a scene file (TOML).
 pub fn load_scene(path: &Path) -> Result<SceneFile> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scene {}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read scene {}", path.display()))?;
     toml::from_str(&text).with_context(|| format!("scene {}", path.display()))
 }

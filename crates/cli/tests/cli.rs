@@ -4,7 +4,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn irmirror(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_irmirror")).args(args).arg("--quiet").output().expect("binary runs")
+    Command::new(env!("CARGO_BIN_EXE_irmirror"))
+        .args(args)
+        .arg("--quiet")
+        .output()
+        .expect("binary runs")
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -19,13 +23,19 @@ fn stderr(o: &Output) -> String {
 
 #[test]
 fn help_explains_every_command() {
-    let o = Command::new(env!("CARGO_BIN_EXE_irmirror")).arg("--help").output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_irmirror"))
+        .arg("--help")
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success());
     for cmd in ["demo", "body"] {
         assert!(text.contains(cmd), "{text}");
     }
-    let o = Command::new(env!("CARGO_BIN_EXE_irmirror")).args(["body", "--help"]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_irmirror"))
+        .args(["body", "--help"])
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&o.stdout);
     for cmd in ["import", "check", "sample"] {
         assert!(text.contains(cmd), "{text}");
@@ -42,9 +52,26 @@ fn demo_is_deterministic_and_complete() {
     let (fa, fb, fc) = (read_tree(&a), read_tree(&b), read_tree(&c));
     let names: Vec<&str> = fa.iter().map(|f| f.0.as_str()).collect();
     for f in [
-        "body.ply", "body.obj", "body.glb", "params.json", "eval.json", "overlay.png", "loss_curve.png", "views/third_camera.png",
-        "views/overview.png", "objects/object_0.ply", "objects/object_0.glb", "hypotheses/body_0.ply", "reflection_mask.png",
-        "person_truth.glb", "person_truth.obj", "person_truth.ply", "report.html", "run.toml", "capture/capture.toml", "capture/thermal.png",
+        "body.ply",
+        "body.obj",
+        "body.glb",
+        "params.json",
+        "eval.json",
+        "overlay.png",
+        "loss_curve.png",
+        "views/third_camera.png",
+        "views/overview.png",
+        "objects/object_0.ply",
+        "objects/object_0.glb",
+        "hypotheses/body_0.ply",
+        "reflection_mask.png",
+        "person_truth.glb",
+        "person_truth.obj",
+        "person_truth.ply",
+        "report.html",
+        "run.toml",
+        "capture/capture.toml",
+        "capture/thermal.png",
     ] {
         assert!(names.contains(&f), "missing {f} in {names:?}");
     }
@@ -56,7 +83,12 @@ fn demo_is_deterministic_and_complete() {
     assert_eq!(read_tree(&a), fc);
     let parent = a.parent().unwrap();
     let leftovers = std::fs::read_dir(parent).unwrap().filter(|e| {
-        let n = e.as_ref().unwrap().file_name().to_string_lossy().into_owned();
+        let n = e
+            .as_ref()
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .into_owned();
         n.contains(&format!("irmirror-cli-{}-demo", std::process::id())) && n.contains("partial")
     });
     assert_eq!(leftovers.count(), 0);
@@ -67,12 +99,53 @@ fn demo_is_deterministic_and_complete() {
 
 #[test]
 fn bad_inputs_fail_cleanly() {
-    let vectors = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
+    let vectors =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
     let cases: Vec<(Vec<String>, &str)> = vec![
-        (vec!["body".into(), "import".into(), "--wheel".into(), "/nonexistent.whl".into(), "--out".into(), tmp("x.safetensors").display().to_string()], "/nonexistent.whl"),
-        (vec!["body".into(), "check".into(), "--vectors".into(), "/nonexistent.json".into()], "/nonexistent.json"),
-        (vec!["body".into(), "check".into(), "--vectors".into(), vectors.display().to_string(), "--asset".into(), "/nonexistent.safetensors".into()], "nonexistent.safetensors"),
-        (vec!["body".into(), "import".into(), "--wheel".into(), "x.whl".into(), "--out".into(), "y".into(), "--rank".into(), "zero".into()], "--rank"),
+        (
+            vec![
+                "body".into(),
+                "import".into(),
+                "--wheel".into(),
+                "/nonexistent.whl".into(),
+                "--out".into(),
+                tmp("x.safetensors").display().to_string(),
+            ],
+            "/nonexistent.whl",
+        ),
+        (
+            vec![
+                "body".into(),
+                "check".into(),
+                "--vectors".into(),
+                "/nonexistent.json".into(),
+            ],
+            "/nonexistent.json",
+        ),
+        (
+            vec![
+                "body".into(),
+                "check".into(),
+                "--vectors".into(),
+                vectors.display().to_string(),
+                "--asset".into(),
+                "/nonexistent.safetensors".into(),
+            ],
+            "nonexistent.safetensors",
+        ),
+        (
+            vec![
+                "body".into(),
+                "import".into(),
+                "--wheel".into(),
+                "x.whl".into(),
+                "--out".into(),
+                "y".into(),
+                "--rank".into(),
+                "zero".into(),
+            ],
+            "--rank",
+        ),
     ];
     for (args, expect) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -85,7 +158,14 @@ fn bad_inputs_fail_cleanly() {
     // A corrupt asset.
     let bad = tmp("bad.safetensors");
     std::fs::write(&bad, b"\x08\x00\x00\x00\x00\x00\x00\x00{}garbage").unwrap();
-    let o = irmirror(&["body", "sample", "--out", tmp("s").to_str().unwrap(), "--asset", bad.to_str().unwrap()]);
+    let o = irmirror(&[
+        "body",
+        "sample",
+        "--out",
+        tmp("s").to_str().unwrap(),
+        "--asset",
+        bad.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("bad.safetensors"), "{}", stderr(&o));
     assert!(!tmp("s").exists(), "a failed run left an output directory");
@@ -94,23 +174,61 @@ fn bad_inputs_fail_cleanly() {
 
 #[test]
 fn body_check_reports_the_builtin_asset_within_tolerance() {
-    let vectors = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
-    let o = irmirror(&["body", "check", "--vectors", vectors.to_str().unwrap(), "--tolerance-m", "5e-4"]);
+    let vectors =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
+    let o = irmirror(&[
+        "body",
+        "check",
+        "--vectors",
+        vectors.to_str().unwrap(),
+        "--tolerance-m",
+        "5e-4",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("skipped") && out.contains("max error"), "{out}");
-    let o = irmirror(&["body", "check", "--vectors", vectors.to_str().unwrap(), "--tolerance-m", "1e-9"]);
+    assert!(
+        out.contains("skipped") && out.contains("max error"),
+        "{out}"
+    );
+    let o = irmirror(&[
+        "body",
+        "check",
+        "--vectors",
+        vectors.to_str().unwrap(),
+        "--tolerance-m",
+        "1e-9",
+    ]);
     assert!(!o.status.success(), "an impossible tolerance passed");
 }
 
 #[test]
 fn benches_print_their_tables() {
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/bench/scene_sphere160.json");
-    let o = irmirror(&["bench", "render", "--scene", scene.to_str().unwrap(), "--no-dense", "--reps", "2"]);
+    let scene =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/bench/scene_sphere160.json");
+    let o = irmirror(&[
+        "bench",
+        "render",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--no-dense",
+        "--reps",
+        "2",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("6980 reflected rays") && out.contains("IoU 1.0000") && out.contains("| fast, ε = 1e-4"), "{out}");
-    let o = irmirror(&["bench", "render", "--scene", "/nonexistent/scene.json", "--no-dense"]);
+    assert!(
+        out.contains("6980 reflected rays")
+            && out.contains("IoU 1.0000")
+            && out.contains("| fast, ε = 1e-4"),
+        "{out}"
+    );
+    let o = irmirror(&[
+        "bench",
+        "render",
+        "--scene",
+        "/nonexistent/scene.json",
+        "--no-dense",
+    ]);
     assert!(!o.status.success() && stderr(&o).contains("/nonexistent/scene.json"));
     let o = irmirror(&["bench", "body", "--reps", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -119,11 +237,21 @@ fn benches_print_their_tables() {
     let o = irmirror(&["bench", "objects", "--seeds", "1"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("| 0 | bowl |") && out.contains("| 0 | mug |") && out.contains("| mug | 1 |"), "{out}");
+    assert!(
+        out.contains("| 0 | bowl |") && out.contains("| 0 | mug |") && out.contains("| mug | 1 |"),
+        "{out}"
+    );
     // Its mug shows three depth pixels of its handle: counted as seen, so its rotation is summarised.
-    assert!(out.contains(" (3 px) |") && !out.contains("handle hidden"), "{out}");
+    assert!(
+        out.contains(" (3 px) |") && !out.contains("handle hidden"),
+        "{out}"
+    );
     let o = irmirror(&["bench", "objects", "--seeds", "0"]);
-    assert!(!o.status.success() && stderr(&o).contains("--seeds"), "{}", stderr(&o));
+    assert!(
+        !o.status.success() && stderr(&o).contains("--seeds"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 fn read_tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
@@ -131,9 +259,16 @@ fn read_tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
     for e in std::fs::read_dir(dir).unwrap() {
         let e = e.unwrap();
         if e.metadata().unwrap().is_dir() {
-            out.extend(read_tree(&e.path()).into_iter().map(|(n, b)| (format!("{}/{n}", e.file_name().to_string_lossy()), b)));
+            out.extend(
+                read_tree(&e.path())
+                    .into_iter()
+                    .map(|(n, b)| (format!("{}/{n}", e.file_name().to_string_lossy()), b)),
+            );
         } else {
-            out.push((e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()));
+            out.push((
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap(),
+            ));
         }
     }
     out.sort();
@@ -144,21 +279,57 @@ fn read_tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
 fn simulate_writes_a_loadable_deterministic_capture() {
     let (a, b) = (tmp("sim-a"), tmp("sim-b"));
     for d in [&a, &b] {
-        let o = irmirror(&["simulate", "--preset", "car", "--out", d.to_str().unwrap(), "--seed", "2"]);
+        let o = irmirror(&[
+            "simulate",
+            "--preset",
+            "car",
+            "--out",
+            d.to_str().unwrap(),
+            "--seed",
+            "2",
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let (ta, tb) = (read_tree(&a), read_tree(&b));
     assert_eq!(ta, tb, "same seed, different capture");
-    for f in ["capture.toml", "depth.png", "thermal.png", "thermal_background.png", "rgb.png", "truth/body.json", "truth/body.ply", "truth/scene.toml", "truth/third_view.png", "truth/stats.json", "preview/thermal.png"] {
+    for f in [
+        "capture.toml",
+        "depth.png",
+        "thermal.png",
+        "thermal_background.png",
+        "rgb.png",
+        "truth/body.json",
+        "truth/body.ply",
+        "truth/scene.toml",
+        "truth/third_view.png",
+        "truth/stats.json",
+        "preview/thermal.png",
+    ] {
         assert!(ta.iter().any(|(n, _)| n == f), "missing {f}");
     }
     let cap = irmirror_capture::Capture::load(&a).unwrap();
     assert_eq!(cap.objects[0].category, "car");
     // Re-simulating from the written scene reproduces the capture.
     let c = tmp("sim-c");
-    let o = irmirror(&["simulate", "--scene", a.join("truth/scene.toml").to_str().unwrap(), "--out", c.to_str().unwrap(), "--seed", "2"]);
+    let o = irmirror(&[
+        "simulate",
+        "--scene",
+        a.join("truth/scene.toml").to_str().unwrap(),
+        "--out",
+        c.to_str().unwrap(),
+        "--seed",
+        "2",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(read_tree(&c).iter().filter(|(n, _)| n.ends_with(".png")).collect::<Vec<_>>(), ta.iter().filter(|(n, _)| n.ends_with(".png")).collect::<Vec<_>>());
+    assert_eq!(
+        read_tree(&c)
+            .iter()
+            .filter(|(n, _)| n.ends_with(".png"))
+            .collect::<Vec<_>>(),
+        ta.iter()
+            .filter(|(n, _)| n.ends_with(".png"))
+            .collect::<Vec<_>>()
+    );
     for d in [a, b, c] {
         std::fs::remove_dir_all(d).ok();
     }
@@ -166,17 +337,35 @@ fn simulate_writes_a_loadable_deterministic_capture() {
     let bad = tmp("bad-scene.toml");
     std::fs::write(&bad, "ambient_c = \"warm\"\n").unwrap();
     let out = tmp("sim-bad");
-    let o = irmirror(&["simulate", "--scene", bad.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-    assert!(!o.status.success() && stderr(&o).contains("bad-scene.toml"), "{}", stderr(&o));
+    let o = irmirror(&[
+        "simulate",
+        "--scene",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("bad-scene.toml"),
+        "{}",
+        stderr(&o)
+    );
     assert!(!out.exists());
     // --out never replaces a file or a directory that is not an irmirror result.
     let precious = tmp("precious");
     std::fs::create_dir_all(&precious).unwrap();
     std::fs::write(precious.join("thesis.tex"), "do not delete").unwrap();
     let o = irmirror(&["demo", "--out", precious.to_str().unwrap()]);
-    assert!(!o.status.success() && stderr(&o).contains("not an irmirror result"), "{}", stderr(&o));
+    assert!(
+        !o.status.success() && stderr(&o).contains("not an irmirror result"),
+        "{}",
+        stderr(&o)
+    );
     assert!(precious.join("thesis.tex").exists());
-    let o = irmirror(&["simulate", "--out", precious.join("thesis.tex").to_str().unwrap()]);
+    let o = irmirror(&[
+        "simulate",
+        "--out",
+        precious.join("thesis.tex").to_str().unwrap(),
+    ]);
     assert!(!o.status.success() && stderr(&o).contains("not a directory"));
     std::fs::remove_dir_all(&precious).ok();
 }
@@ -184,46 +373,129 @@ fn simulate_writes_a_loadable_deterministic_capture() {
 #[test]
 fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
     let cap = tmp("rec-capture");
-    let o = irmirror(&["simulate", "--preset", "car", "--out", cap.to_str().unwrap(), "--seed", "3"]);
+    let o = irmirror(&[
+        "simulate",
+        "--preset",
+        "car",
+        "--out",
+        cap.to_str().unwrap(),
+        "--seed",
+        "3",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let before = read_tree(&cap);
     let out = tmp("rec-out");
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--stage", "preprocess"]);
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--stage",
+        "preprocess",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    for f in ["reflection_mask.png", "run.toml", "debug/rise.png", "debug/object_pixels.png", "debug/mask_raw.png", "debug/edges.png"] {
+    for f in [
+        "reflection_mask.png",
+        "run.toml",
+        "debug/rise.png",
+        "debug/object_pixels.png",
+        "debug/mask_raw.png",
+        "debug/edges.png",
+    ] {
         assert!(out.join(f).exists(), "missing {f}");
     }
     assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
     // The full pipeline: meshes, parameters, images, report; the input untouched.
     let out2 = tmp("rec-out2");
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap(), "--seed", "1"]);
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+        "--seed",
+        "1",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    for f in ["body.ply", "body.obj", "body.glb", "params.json", "overlay.png", "loss_curve.png", "report.html", "run.toml", "objects/object_0.ply", "views/overview.png"] {
+    for f in [
+        "body.ply",
+        "body.obj",
+        "body.glb",
+        "params.json",
+        "overlay.png",
+        "loss_curve.png",
+        "report.html",
+        "run.toml",
+        "objects/object_0.ply",
+        "views/overview.png",
+    ] {
         assert!(out2.join(f).exists(), "missing {f}");
     }
-    let params: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out2.join("params.json")).unwrap()).unwrap();
+    let params: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out2.join("params.json")).unwrap()).unwrap();
     assert!(!params["human"]["hypotheses"].as_array().unwrap().is_empty());
     assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
     // Stage 1 alone, and an unknown ablation is refused by the parser.
     let out3 = tmp("rec-out3");
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out3.to_str().unwrap(), "--stage", "objects"]);
-    assert!(o.status.success() && out3.join("objects/object_0.ply").exists() && out3.join("objects.json").exists(), "{}", stderr(&o));
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out3.to_str().unwrap(), "--ablate", "everything"]);
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        out3.to_str().unwrap(),
+        "--stage",
+        "objects",
+    ]);
+    assert!(
+        o.status.success()
+            && out3.join("objects/object_0.ply").exists()
+            && out3.join("objects.json").exists(),
+        "{}",
+        stderr(&o)
+    );
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        out3.to_str().unwrap(),
+        "--ablate",
+        "everything",
+    ]);
     assert!(!o.status.success() && stderr(&o).contains("--ablate"));
     // A config with an unknown setting: a clear error naming it, no output.
     let bad = tmp("rec-bad.toml");
     std::fs::write(&bad, "[human]\ninits = 4\nbogus = 1\n").unwrap();
     let out4 = tmp("rec-out4");
-    let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out4.to_str().unwrap(), "--config", bad.to_str().unwrap()]);
-    assert!(!o.status.success() && stderr(&o).contains("bogus") && !out4.exists(), "{}", stderr(&o));
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        out4.to_str().unwrap(),
+        "--config",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("bogus") && !out4.exists(),
+        "{}",
+        stderr(&o)
+    );
     std::fs::remove_file(&bad).ok();
     std::fs::remove_dir_all(&out2).ok();
     std::fs::remove_dir_all(&out3).ok();
     // A capture whose thermal frame equals its background: no reflection, clear error, no output.
     std::fs::copy(cap.join("thermal_background.png"), cap.join("thermal.png")).unwrap();
     for stage in ["preprocess", "full"] {
-        let o = irmirror(&["reconstruct", cap.to_str().unwrap(), "--out", out2.to_str().unwrap(), "--stage", stage]);
-        assert!(!o.status.success() && stderr(&o).contains("no reflection"), "{}", stderr(&o));
+        let o = irmirror(&[
+            "reconstruct",
+            cap.to_str().unwrap(),
+            "--out",
+            out2.to_str().unwrap(),
+            "--stage",
+            stage,
+        ]);
+        assert!(
+            !o.status.success() && stderr(&o).contains("no reflection"),
+            "{}",
+            stderr(&o)
+        );
         assert!(!out2.exists());
     }
     for d in [cap, out] {
@@ -236,10 +508,29 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
     let dir = tmp("train-sdf");
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("mug.safetensors");
-    let o = irmirror(&["train-sdf", "--category", "mug", "--out", out.to_str().unwrap(), "--shapes", "2", "--steps", "10", "--samples", "500", "--held-out", "0", "--width", "32"]);
+    let o = irmirror(&[
+        "train-sdf",
+        "--category",
+        "mug",
+        "--out",
+        out.to_str().unwrap(),
+        "--shapes",
+        "2",
+        "--steps",
+        "10",
+        "--samples",
+        "500",
+        "--held-out",
+        "0",
+        "--width",
+        "32",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let net = irmirror_sdf::SdfNet::load(&out).unwrap();
-    assert_eq!((net.category, net.width, net.train_latents.len()), (irmirror_sdf::Category::Mug, 32, 2));
+    assert_eq!(
+        (net.category, net.width, net.train_latents.len()),
+        (irmirror_sdf::Category::Mug, 32, 2)
+    );
     assert!(net.metadata["command"].starts_with("irmirror train-sdf --category mug"));
     assert!(out.with_extension("json").is_file());
     // Bad input: clear message, non-zero exit, nothing written.
@@ -249,8 +540,19 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
     let bad = dir.join("bad.safetensors");
     for (args, needle) in [
         (vec!["--category", "chair"], "unknown object category"),
-        (vec!["--category", "mug", "--meshes", meshes.to_str().unwrap()], "broken.obj"),
-        (vec!["--category", "mug", "--meshes", dir.join("none").to_str().unwrap()], "cannot list"),
+        (
+            vec!["--category", "mug", "--meshes", meshes.to_str().unwrap()],
+            "broken.obj",
+        ),
+        (
+            vec![
+                "--category",
+                "mug",
+                "--meshes",
+                dir.join("none").to_str().unwrap(),
+            ],
+            "cannot list",
+        ),
         (vec!["--category", "mug", "--steps", "0"], "--steps"),
     ] {
         let mut all = vec!["train-sdf", "--out", bad.to_str().unwrap()];
@@ -260,7 +562,13 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
         assert!(stderr(&o).contains(needle), "{needle}: {}", stderr(&o));
         assert!(!bad.exists());
     }
-    let o = irmirror(&["train-sdf", "--category", "mug", "--out", dir.join("x.bin").to_str().unwrap()]);
+    let o = irmirror(&[
+        "train-sdf",
+        "--category",
+        "mug",
+        "--out",
+        dir.join("x.bin").to_str().unwrap(),
+    ]);
     assert!(!o.status.success() && stderr(&o).contains(".safetensors"));
 }
 
@@ -268,13 +576,26 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
 fn eval_writes_table_results_and_report() {
     // One capture per object type (the whole quick set is the ignored test below).
     let out = tmp("eval");
-    let o = irmirror(&["eval", "--preset", "quick", "--limit", "1", "--out", out.to_str().unwrap()]);
+    let o = irmirror(&[
+        "eval",
+        "--preset",
+        "quick",
+        "--limit",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
-    for row in ["| 2-D keypoints, normalised | bowl | 1 |", "| 3-D keypoints, normalised | mug | 1 |", "| root error (m) | car | 1 |"] {
+    for row in [
+        "| 2-D keypoints, normalised | bowl | 1 |",
+        "| 3-D keypoints, normalised | mug | 1 |",
+        "| root error (m) | car | 1 |",
+    ] {
         assert!(table.contains(row), "{table}");
     }
-    let results: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     let caps = results["captures"].as_array().unwrap();
     assert_eq!(caps.len(), 3);
     for c in caps {
@@ -285,14 +606,31 @@ fn eval_writes_table_results_and_report() {
         assert!(out.join(format!("captures/{id}/overlay.png")).is_file());
         assert!(out.join(format!("captures/{id}/third.png")).is_file());
     }
-    assert!(std::fs::read_to_string(out.join("report.html")).unwrap().contains("captures/car_00/third.png"));
+    assert!(
+        std::fs::read_to_string(out.join("report.html"))
+            .unwrap()
+            .contains("captures/car_00/third.png")
+    );
     assert!(out.join("run.toml").is_file());
     assert!(!out.join("scratch").exists());
 
     // An object type the benchmark does not have: a clear error, nothing written.
     let bad = tmp("eval-teapot");
-    let o = irmirror(&["eval", "--category", "teapot", "--full-only", "--out", bad.to_str().unwrap()]);
-    assert!(!o.status.success() && stderr(&o).contains("teapot") && stderr(&o).contains("bowl, mug, car"), "{}", stderr(&o));
+    let o = irmirror(&[
+        "eval",
+        "--category",
+        "teapot",
+        "--full-only",
+        "--out",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success()
+            && stderr(&o).contains("teapot")
+            && stderr(&o).contains("bowl, mug, car"),
+        "{}",
+        stderr(&o)
+    );
     assert!(!bad.exists());
 }
 

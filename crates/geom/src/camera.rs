@@ -31,7 +31,14 @@ impl PinholeCamera {
     /// field of view `fov_x_rad`.
     pub fn from_fov(width: u32, height: u32, fov_x_rad: f64) -> Result<Self, GeomError> {
         let fx = f64::from(width) / 2.0 / (fov_x_rad / 2.0).tan();
-        let cam = Self { width, height, fx, fy: fx, cx: f64::from(width) / 2.0, cy: f64::from(height) / 2.0 };
+        let cam = Self {
+            width,
+            height,
+            fx,
+            fy: fx,
+            cx: f64::from(width) / 2.0,
+            cy: f64::from(height) / 2.0,
+        };
         cam.validate()?;
         Ok(cam)
     }
@@ -41,17 +48,30 @@ impl PinholeCamera {
     pub fn validate(&self) -> Result<(), GeomError> {
         let bad = |s: String| Err(GeomError::InvalidCamera(s));
         if self.width == 0 || self.height == 0 {
-            return bad(format!("image size {}×{} must be positive", self.width, self.height));
+            return bad(format!(
+                "image size {}×{} must be positive",
+                self.width, self.height
+            ));
         }
-        for (name, v) in [("fx", self.fx), ("fy", self.fy), ("cx", self.cx), ("cy", self.cy)] {
+        for (name, v) in [
+            ("fx", self.fx),
+            ("fy", self.fy),
+            ("cx", self.cx),
+            ("cy", self.cy),
+        ] {
             if !v.is_finite() {
                 return bad(format!("{name} = {v} is not finite"));
             }
         }
         if self.fx <= 0.0 || self.fy <= 0.0 {
-            return bad(format!("focal lengths must be positive (fx = {}, fy = {})", self.fx, self.fy));
+            return bad(format!(
+                "focal lengths must be positive (fx = {}, fy = {})",
+                self.fx, self.fy
+            ));
         }
-        if !(0.0..=f64::from(self.width)).contains(&self.cx) || !(0.0..=f64::from(self.height)).contains(&self.cy) {
+        if !(0.0..=f64::from(self.width)).contains(&self.cx)
+            || !(0.0..=f64::from(self.height)).contains(&self.cy)
+        {
             return bad(format!(
                 "principal point ({}, {}) lies outside the {}×{} image",
                 self.cx, self.cy, self.width, self.height
@@ -62,7 +82,11 @@ impl PinholeCamera {
 
     /// Unit ray (camera frame) through continuous image point `(u, v)`.
     pub fn ray_at<T: Real>(&self, u: f64, v: f64) -> Ray<T> {
-        let d = Vector3::new(T::of((u - self.cx) / self.fx), T::of((v - self.cy) / self.fy), T::one());
+        let d = Vector3::new(
+            T::of((u - self.cx) / self.fx),
+            T::of((v - self.cy) / self.fy),
+            T::one(),
+        );
         Ray::new(Vector3::zeros(), d)
     }
 
@@ -77,7 +101,10 @@ impl PinholeCamera {
         if z <= 0.0 {
             return None;
         }
-        Some((self.fx * p_cam.x.to_f64() / z + self.cx, self.fy * p_cam.y.to_f64() / z + self.cy))
+        Some((
+            self.fx * p_cam.x.to_f64() / z + self.cx,
+            self.fy * p_cam.y.to_f64() / z + self.cy,
+        ))
     }
 
     /// The pixel (col, row) containing a camera-frame point, if it projects inside the image.
@@ -89,7 +116,11 @@ impl PinholeCamera {
 
     /// Camera-frame point at depth `z_m` (metres along +Z, not along the ray) under image point `(u, v)`.
     pub fn unproject(&self, u: f64, v: f64, z_m: f64) -> Vector3<f64> {
-        Vector3::new((u - self.cx) / self.fx * z_m, (v - self.cy) / self.fy * z_m, z_m)
+        Vector3::new(
+            (u - self.cx) / self.fx * z_m,
+            (v - self.cy) / self.fy * z_m,
+            z_m,
+        )
     }
 }
 
@@ -98,7 +129,14 @@ mod tests {
     use super::*;
 
     fn cam() -> PinholeCamera {
-        PinholeCamera { width: 160, height: 120, fx: 150.0, fy: 152.0, cx: 80.0, cy: 60.0 }
+        PinholeCamera {
+            width: 160,
+            height: 120,
+            fx: 150.0,
+            fy: 152.0,
+            cx: 80.0,
+            cy: 60.0,
+        }
     }
 
     #[test]
@@ -115,7 +153,12 @@ mod tests {
     #[test]
     fn project_unproject_round_trip() {
         let c = cam();
-        for (u, v, z) in [(0.0, 0.0, 0.5), (159.9, 119.9, 3.0), (80.0, 60.0, 1.0), (12.25, 100.5, 0.01)] {
+        for (u, v, z) in [
+            (0.0, 0.0, 0.5),
+            (159.9, 119.9, 3.0),
+            (80.0, 60.0, 1.0),
+            (12.25, 100.5, 0.01),
+        ] {
             let p = c.unproject(u, v, z);
             let (u2, v2) = c.project(&p).unwrap();
             assert!((u - u2).abs() < 1e-9 && (v - v2).abs() < 1e-9);

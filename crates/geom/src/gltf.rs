@@ -15,15 +15,18 @@ pub fn write_glb(mesh: &TriMesh, path: &Path) -> Result<(), GeomError> {
     let (lo, hi) = mesh.bounds().unwrap_or(([0.0; 3], [0.0; 3]));
     let mut bin: Vec<u8> = Vec::new();
     for v in &mesh.vertices {
-        v.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+        v.iter()
+            .for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
     }
     let normals_offset = bin.len();
     for n in &normals {
-        n.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+        n.iter()
+            .for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
     }
     let index_offset = bin.len();
     for t in &mesh.triangles {
-        t.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+        t.iter()
+            .for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
     }
     let nv = mesh.vertices.len();
     let doc = json!({
@@ -73,7 +76,10 @@ mod tests {
         cube.write(&p).unwrap();
         let b = std::fs::read(&p).unwrap();
         assert_eq!(&b[0..4], b"glTF");
-        assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize, b.len());
+        assert_eq!(
+            u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize,
+            b.len()
+        );
         let jlen = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
         assert_eq!(jlen % 4, 0);
         let doc: serde_json::Value = serde_json::from_slice(&b[20..20 + jlen]).unwrap();

@@ -9,15 +9,32 @@ use std::collections::HashMap;
 
 /// The six tetrahedra of a cube (corner indices, bit i of a corner = +1 along axis i), all
 /// sharing the main diagonal 0–7.
-const TETS: [[usize; 4]; 6] = [[0, 1, 3, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 6, 4, 7], [0, 4, 5, 7], [0, 5, 1, 7]];
+const TETS: [[usize; 4]; 6] = [
+    [0, 1, 3, 7],
+    [0, 3, 2, 7],
+    [0, 2, 6, 7],
+    [0, 6, 4, 7],
+    [0, 4, 5, 7],
+    [0, 5, 1, 7],
+];
 
 /// Extracts the zero level set of `f` inside the box `[lo, hi]` with `n` cells per axis.
-pub fn isosurface(f: impl Fn(&Vector3<f64>) -> f64 + Sync, lo: Vector3<f64>, hi: Vector3<f64>, n: usize) -> TriMesh {
+pub fn isosurface(
+    f: impl Fn(&Vector3<f64>) -> f64 + Sync,
+    lo: Vector3<f64>,
+    hi: Vector3<f64>,
+    n: usize,
+) -> TriMesh {
     let n = n.max(2);
     let step = (hi - lo) / n as f64;
     let np = n + 1;
-    let point = |i: usize, j: usize, k: usize| lo + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z);
-    let values: Vec<f64> = (0..np * np * np).into_par_iter().map(|g| f(&point(g % np, (g / np) % np, g / (np * np)))).collect();
+    let point = |i: usize, j: usize, k: usize| {
+        lo + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z)
+    };
+    let values: Vec<f64> = (0..np * np * np)
+        .into_par_iter()
+        .map(|g| f(&point(g % np, (g / np) % np, g / (np * np))))
+        .collect();
     isosurface_grid(&values, lo, hi, n)
 }
 
@@ -26,7 +43,15 @@ pub fn grid_points(lo: Vector3<f64>, hi: Vector3<f64>, n: usize) -> Vec<Vector3<
     let n = n.max(2);
     let np = n + 1;
     let step = (hi - lo) / n as f64;
-    (0..np * np * np).map(|g| lo + Vector3::new((g % np) as f64 * step.x, ((g / np) % np) as f64 * step.y, (g / (np * np)) as f64 * step.z)).collect()
+    (0..np * np * np)
+        .map(|g| {
+            lo + Vector3::new(
+                (g % np) as f64 * step.x,
+                ((g / np) % np) as f64 * step.y,
+                (g / (np * np)) as f64 * step.z,
+            )
+        })
+        .collect()
 }
 
 /// Like [`isosurface`], from field values already computed at [`grid_points`] (e.g. by a batched
@@ -37,7 +62,9 @@ pub fn isosurface_grid(values: &[f64], lo: Vector3<f64>, hi: Vector3<f64>, n: us
     let np = n + 1;
     assert_eq!(values.len(), np * np * np, "one value per grid point");
     let idx = |i: usize, j: usize, k: usize| (k * np + j) * np + i;
-    let point = |i: usize, j: usize, k: usize| lo + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z);
+    let point = |i: usize, j: usize, k: usize| {
+        lo + Vector3::new(i as f64 * step.x, j as f64 * step.y, k as f64 * step.z)
+    };
     let mut mesh = TriMesh::default();
     let mut edge_vertex: HashMap<(usize, usize), u32> = HashMap::new();
     for k in 0..n {
@@ -59,30 +86,52 @@ pub fn isosurface_grid(values: &[f64], lo: Vector3<f64>, hi: Vector3<f64>, n: us
                         continue;
                     }
                     // Gradient of the linear interpolant over the tetrahedron, to orient faces.
-                    let m = nalgebra::Matrix3::from_rows(&[(p[1] - p[0]).transpose(), (p[2] - p[0]).transpose(), (p[3] - p[0]).transpose()]);
-                    let dv = Vector3::new(values[g[1]] - values[g[0]], values[g[2]] - values[g[0]], values[g[3]] - values[g[0]]);
-                    let grad = m.try_inverse().map(|mi| mi * dv).unwrap_or_else(Vector3::zeros);
+                    let m = nalgebra::Matrix3::from_rows(&[
+                        (p[1] - p[0]).transpose(),
+                        (p[2] - p[0]).transpose(),
+                        (p[3] - p[0]).transpose(),
+                    ]);
+                    let dv = Vector3::new(
+                        values[g[1]] - values[g[0]],
+                        values[g[2]] - values[g[0]],
+                        values[g[3]] - values[g[0]],
+                    );
+                    let grad = m
+                        .try_inverse()
+                        .map(|mi| mi * dv)
+                        .unwrap_or_else(Vector3::zeros);
                     let emit = |mesh: &mut TriMesh, tri: [u32; 3]| {
-                        let v = tri.map(|t| Vector3::from(mesh.vertices[t as usize].map(f64::from)));
+                        let v =
+                            tri.map(|t| Vector3::from(mesh.vertices[t as usize].map(f64::from)));
                         let nrm = (v[1] - v[0]).cross(&(v[2] - v[0]));
                         if nrm.norm_squared() == 0.0 {
                             return;
                         }
-                        mesh.triangles.push(if nrm.dot(&grad) >= 0.0 { tri } else { [tri[0], tri[2], tri[1]] });
+                        mesh.triangles.push(if nrm.dot(&grad) >= 0.0 {
+                            tri
+                        } else {
+                            [tri[0], tri[2], tri[1]]
+                        });
                     };
                     // The vertex on tetrahedron edge (a, b), shared with every cell that has it.
                     let mut ev = |a: usize, b: usize, mesh: &mut TriMesh| -> u32 {
-                        *edge_vertex.entry((g[a].min(g[b]), g[a].max(g[b]))).or_insert_with(|| {
-                            let (va, vb) = (values[g[a]], values[g[b]]);
-                            let t = if va == vb { 0.5 } else { va / (va - vb) };
-                            let q = p[a] + (p[b] - p[a]) * t;
-                            mesh.vertices.push([q.x as f32, q.y as f32, q.z as f32]);
-                            (mesh.vertices.len() - 1) as u32
-                        })
+                        *edge_vertex
+                            .entry((g[a].min(g[b]), g[a].max(g[b])))
+                            .or_insert_with(|| {
+                                let (va, vb) = (values[g[a]], values[g[b]]);
+                                let t = if va == vb { 0.5 } else { va / (va - vb) };
+                                let q = p[a] + (p[b] - p[a]) * t;
+                                mesh.vertices.push([q.x as f32, q.y as f32, q.z as f32]);
+                                (mesh.vertices.len() - 1) as u32
+                            })
                     };
                     match inside.len() {
                         1 | 3 => {
-                            let (lone, others) = if inside.len() == 1 { (inside[0], outside.clone()) } else { (outside[0], inside.clone()) };
+                            let (lone, others) = if inside.len() == 1 {
+                                (inside[0], outside.clone())
+                            } else {
+                                (outside[0], inside.clone())
+                            };
                             let t = [0, 1, 2].map(|q| ev(lone, others[q], &mut mesh));
                             emit(&mut mesh, t);
                         }
@@ -110,7 +159,12 @@ mod tests {
     #[test]
     fn sphere_mesh_is_closed_outward_and_on_the_surface() {
         let r = 0.7;
-        let m = isosurface(|p| p.norm() - r, Vector3::repeat(-1.0), Vector3::repeat(1.0), 24);
+        let m = isosurface(
+            |p| p.norm() - r,
+            Vector3::repeat(-1.0),
+            Vector3::repeat(1.0),
+            24,
+        );
         let vol = m.signed_volume();
         let exact = 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
         assert!((vol / exact - 1.0).abs() < 0.03, "volume {vol} vs {exact}");

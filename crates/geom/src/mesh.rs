@@ -15,18 +15,31 @@ pub struct TriMesh {
 impl TriMesh {
     /// A mesh after checking that every index is in range and every coordinate finite.
     pub fn new(vertices: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Result<Self, GeomError> {
-        let m = Self { vertices, triangles };
+        let m = Self {
+            vertices,
+            triangles,
+        };
         m.validate()?;
         Ok(m)
     }
 
     /// Checks indices and coordinates.
     pub fn validate(&self) -> Result<(), GeomError> {
-        if let Some(i) = self.vertices.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
-            return Err(GeomError::InvalidMesh(format!("vertex {i} has a non-finite coordinate")));
+        if let Some(i) = self
+            .vertices
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return Err(GeomError::InvalidMesh(format!(
+                "vertex {i} has a non-finite coordinate"
+            )));
         }
         let n = self.vertices.len() as u64;
-        if let Some(t) = self.triangles.iter().position(|t| t.iter().any(|&i| u64::from(i) >= n)) {
+        if let Some(t) = self
+            .triangles
+            .iter()
+            .position(|t| t.iter().any(|&i| u64::from(i) >= n))
+        {
             return Err(GeomError::InvalidMesh(format!(
                 "triangle {t} indexes a vertex beyond the {n} vertices"
             )));
@@ -37,13 +50,17 @@ impl TriMesh {
     /// Axis-aligned bounds `(min, max)`, or `None` for an empty mesh.
     pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
         let first = *self.vertices.first()?;
-        Some(self.vertices.iter().fold((first, first), |(mut lo, mut hi), v| {
-            for k in 0..3 {
-                lo[k] = lo[k].min(v[k]);
-                hi[k] = hi[k].max(v[k]);
-            }
-            (lo, hi)
-        }))
+        Some(
+            self.vertices
+                .iter()
+                .fold((first, first), |(mut lo, mut hi), v| {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(v[k]);
+                        hi[k] = hi[k].max(v[k]);
+                    }
+                    (lo, hi)
+                }),
+        )
     }
 
     /// The connected components (triangles sharing vertices) whose |signed volume| is at least
@@ -69,9 +86,17 @@ impl TriMesh {
         }
         let mut volume = std::collections::HashMap::new();
         for t in &self.triangles {
-            *volume.entry(find(&mut parent, t[0] as usize)).or_insert(0.0) += self.tetra_volume(t);
+            *volume
+                .entry(find(&mut parent, t[0] as usize))
+                .or_insert(0.0) += self.tetra_volume(t);
         }
-        let Some(largest) = volume.values().map(|v: &f64| v.abs()).max_by(f64::total_cmp) else { return TriMesh::default() };
+        let Some(largest) = volume
+            .values()
+            .map(|v: &f64| v.abs())
+            .max_by(f64::total_cmp)
+        else {
+            return TriMesh::default();
+        };
         let mut index = vec![u32::MAX; n];
         let mut out = TriMesh::default();
         for t in &self.triangles {
@@ -92,7 +117,11 @@ impl TriMesh {
     /// Signed volume of the tetrahedron (origin, triangle `t`).
     fn tetra_volume(&self, t: &[u32; 3]) -> f64 {
         let [a, b, c] = t.map(|i| self.vertices[i as usize].map(f64::from));
-        let cross = [b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0]];
+        let cross = [
+            b[1] * c[2] - b[2] * c[1],
+            b[2] * c[0] - b[0] * c[2],
+            b[0] * c[1] - b[1] * c[0],
+        ];
         (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0
     }
 
@@ -108,7 +137,11 @@ impl TriMesh {
             let [a, b, c] = t.map(|i| self.vertices[i as usize]);
             let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
             let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let f = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+            let f = [
+                e1[1] * e2[2] - e1[2] * e2[1],
+                e1[2] * e2[0] - e1[0] * e2[2],
+                e1[0] * e2[1] - e1[1] * e2[0],
+            ];
             for &i in t {
                 for k in 0..3 {
                     n[i as usize][k] += f[k];
@@ -135,7 +168,10 @@ impl TriMesh {
             Some("ply") => crate::ply::write_ply(self, path),
             Some("obj") => crate::obj::write_obj(self, path),
             Some("glb") => crate::gltf::write_glb(self, path),
-            _ => Err(GeomError::format(path, "unknown mesh extension (use .ply, .obj or .glb)")),
+            _ => Err(GeomError::format(
+                path,
+                "unknown mesh extension (use .ply, .obj or .glb)",
+            )),
         }
     }
 
@@ -144,23 +180,46 @@ impl TriMesh {
         let mesh = match extension(path).as_deref() {
             Some("ply") => crate::ply::read_ply(path)?,
             Some("obj") => crate::obj::read_obj(path)?,
-            _ => return Err(GeomError::format(path, "unknown mesh extension (use .ply or .obj)")),
+            _ => {
+                return Err(GeomError::format(
+                    path,
+                    "unknown mesh extension (use .ply or .obj)",
+                ));
+            }
         };
-        mesh.validate().map_err(|e| GeomError::format(path, e.to_string()))?;
+        mesh.validate()
+            .map_err(|e| GeomError::format(path, e.to_string()))?;
         Ok(mesh)
     }
 }
 
 fn extension(path: &Path) -> Option<String> {
-    path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
 }
 
 /// A unit cube (for tests and examples), CCW outward.
 pub fn unit_cube() -> TriMesh {
-    let v = (0..8).map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32]).collect();
-    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-    let t = quads.iter().flat_map(|q: &[u32; 4]| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-    TriMesh { vertices: v, triangles: t }
+    let v = (0..8)
+        .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
+        .collect();
+    let quads = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let t = quads
+        .iter()
+        .flat_map(|q: &[u32; 4]| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
+    TriMesh {
+        vertices: v,
+        triangles: t,
+    }
 }
 
 #[cfg(test)]
@@ -175,22 +234,33 @@ mod tests {
         let mut both = small.clone();
         let off = both.vertices.len() as u32;
         both.vertices.extend(&big.vertices);
-        both.triangles.extend(big.triangles.iter().map(|t| t.map(|i| i + off)));
+        both.triangles
+            .extend(big.triangles.iter().map(|t| t.map(|i| i + off)));
         let kept = both.main_components(1.0);
-        assert_eq!((kept.vertices.len(), kept.triangles.len()), (big.vertices.len(), big.triangles.len()));
+        assert_eq!(
+            (kept.vertices.len(), kept.triangles.len()),
+            (big.vertices.len(), big.triangles.len())
+        );
         assert_eq!(kept.bounds(), big.bounds(), "the unit cube is kept");
         assert!((kept.signed_volume() - 1.0).abs() < 1e-12);
         // A piece of 1 ‰ of the volume goes at 2 %, one of 1.6 % stays at 1 %.
-        assert_eq!(both.main_components(0.02).triangles.len(), big.triangles.len());
+        assert_eq!(
+            both.main_components(0.02).triangles.len(),
+            big.triangles.len()
+        );
         let mut medium = unit_cube();
         medium.map_vertices(|v| v.map(|x| 0.25 * x - 3.0));
         let off = both.vertices.len() as u32;
         both.vertices.extend(&medium.vertices);
-        both.triangles.extend(medium.triangles.iter().map(|t| t.map(|i| i + off)));
+        both.triangles
+            .extend(medium.triangles.iter().map(|t| t.map(|i| i + off)));
         let kept = both.main_components(0.01);
         assert_eq!(kept.triangles.len(), 2 * big.triangles.len());
         assert!((kept.signed_volume() - (1.0 + 0.25f64.powi(3))).abs() < 1e-6);
-        assert_eq!(both.main_components(0.02).triangles.len(), big.triangles.len());
+        assert_eq!(
+            both.main_components(0.02).triangles.len(),
+            big.triangles.len()
+        );
     }
 
     #[test]

@@ -8,8 +8,13 @@ use std::path::Path;
 pub fn write_obj(mesh: &TriMesh, path: &Path) -> Result<(), GeomError> {
     let io = |e| GeomError::io(path, e);
     let mut w = BufWriter::new(std::fs::File::create(path).map_err(io)?);
-    writeln!(w, "# irmirror mesh, metres\n# {} vertices, {} triangles", mesh.vertices.len(), mesh.triangles.len())
-        .map_err(io)?;
+    writeln!(
+        w,
+        "# irmirror mesh, metres\n# {} vertices, {} triangles",
+        mesh.vertices.len(),
+        mesh.triangles.len()
+    )
+    .map_err(io)?;
     for v in &mesh.vertices {
         writeln!(w, "v {} {} {}", v[0], v[1], v[2]).map_err(io)?;
     }
@@ -28,7 +33,11 @@ pub fn read_obj(path: &Path) -> Result<TriMesh, GeomError> {
         let mut tok = line.split_whitespace();
         match tok.next() {
             Some("v") => {
-                let xyz: Vec<f32> = tok.take(3).map(|s| s.parse::<f32>()).collect::<Result<_, _>>().map_err(|_| fail("bad vertex"))?;
+                let xyz: Vec<f32> = tok
+                    .take(3)
+                    .map(|s| s.parse::<f32>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| fail("bad vertex"))?;
                 if xyz.len() != 3 {
                     return Err(fail("vertex needs three coordinates"));
                 }
@@ -38,7 +47,12 @@ pub fn read_obj(path: &Path) -> Result<TriMesh, GeomError> {
                 let n = mesh.vertices.len() as i64;
                 let idx: Vec<u32> = tok
                     .map(|s| {
-                        let i: i64 = s.split('/').next().unwrap_or("").parse().map_err(|_| fail("bad face index"))?;
+                        let i: i64 = s
+                            .split('/')
+                            .next()
+                            .unwrap_or("")
+                            .parse()
+                            .map_err(|_| fail("bad face index"))?;
                         let i = if i < 0 { n + i } else { i - 1 };
                         u32::try_from(i).map_err(|_| fail("face index out of range"))
                     })
@@ -58,8 +72,8 @@ pub fn read_obj(path: &Path) -> Result<TriMesh, GeomError> {
 
 #[cfg(test)]
 mod tests {
-    use crate::mesh::unit_cube;
     use crate::TriMesh;
+    use crate::mesh::unit_cube;
 
     #[test]
     fn obj_round_trip() {

@@ -117,20 +117,27 @@ pub fn read_ply(path: &Path) -> Result<TriMesh, GeomError> {
             ["format", f, ..] => return Err(fail(format!("unsupported PLY format '{f}'"))),
             ["element", name, count] => elements.push(Element {
                 name: name.to_string(),
-                count: count.parse().map_err(|_| fail(format!("bad element count '{count}'")))?,
+                count: count
+                    .parse()
+                    .map_err(|_| fail(format!("bad element count '{count}'")))?,
                 props: vec![],
             }),
             ["property", "list", c, i, name] => {
                 let (c, i) = (Scalar::parse(c), Scalar::parse(i));
-                let el = elements.last_mut().ok_or_else(|| fail("property before element".into()))?;
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| fail("property before element".into()))?;
                 match (c, i) {
                     (Some(c), Some(i)) => el.props.push(Prop::List(name.to_string(), c, i)),
                     _ => return Err(fail(format!("unknown list types in '{l}'"))),
                 }
             }
             ["property", t, name] => {
-                let t = Scalar::parse(t).ok_or_else(|| fail(format!("unknown property type in '{l}'")))?;
-                let el = elements.last_mut().ok_or_else(|| fail("property before element".into()))?;
+                let t = Scalar::parse(t)
+                    .ok_or_else(|| fail(format!("unknown property type in '{l}'")))?;
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| fail("property before element".into()))?;
                 el.props.push(Prop::Scalar(name.to_string(), t));
             }
             ["end_header"] => break,
@@ -141,7 +148,8 @@ pub fn read_ply(path: &Path) -> Result<TriMesh, GeomError> {
     let mut ascii_tokens: Vec<String> = Vec::new();
     if !binary {
         let mut rest = String::new();
-        r.read_to_string(&mut rest).map_err(|e| GeomError::io(path, e))?;
+        r.read_to_string(&mut rest)
+            .map_err(|e| GeomError::io(path, e))?;
         ascii_tokens = rest.split_whitespace().rev().map(str::to_string).collect();
     }
     let truncated = || fail("file is truncated (fewer elements than the header declares)".into());
@@ -150,12 +158,16 @@ pub fn read_ply(path: &Path) -> Result<TriMesh, GeomError> {
             t.read_bin(r).map_err(|_| truncated())
         } else {
             let s = ascii_tokens.pop().ok_or_else(truncated)?;
-            s.parse::<f64>().map_err(|_| fail(format!("'{s}' is not a number")))
+            s.parse::<f64>()
+                .map_err(|_| fail(format!("'{s}' is not a number")))
         }
     };
     for el in &elements {
         if el.count > 100_000_000 {
-            return Err(fail(format!("element '{}' declares an implausible count {}", el.name, el.count)));
+            return Err(fail(format!(
+                "element '{}' declares an implausible count {}",
+                el.name, el.count
+            )));
         }
         for _ in 0..el.count {
             let mut xyz = [0.0f32; 3];
@@ -180,7 +192,8 @@ pub fn read_ply(path: &Path) -> Result<TriMesh, GeomError> {
                             }
                             idx.push(v as u32);
                         }
-                        if el.name == "face" && (name == "vertex_indices" || name == "vertex_index") {
+                        if el.name == "face" && (name == "vertex_indices" || name == "vertex_index")
+                        {
                             for k in 1..n.saturating_sub(1) {
                                 mesh.triangles.push([idx[0], idx[k], idx[k + 1]]);
                             }
@@ -219,7 +232,12 @@ mod tests {
         // Truncation and bad indices are errors, not panics.
         let bytes = std::fs::read(&p).unwrap();
         std::fs::write(&p, &bytes[..bytes.len() - 7]).unwrap();
-        assert!(TriMesh::read(&p).unwrap_err().to_string().contains("truncated"));
+        assert!(
+            TriMesh::read(&p)
+                .unwrap_err()
+                .to_string()
+                .contains("truncated")
+        );
         std::fs::write(&a, "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n3 0 1 2\n").unwrap();
         assert!(TriMesh::read(&a).is_err());
         std::fs::write(&a, "not a ply").unwrap();

@@ -9,7 +9,11 @@ use nalgebra::{Matrix3, Vector3};
 /// +Z), orthographically, fitted into a `size`×`size` image with a margin. Returns a shaded
 /// image: Lambertian grey by facing ratio, white background.
 pub fn render_orthographic(mesh: &TriMesh, view_from_mesh: &Matrix3<f32>, size: u32) -> RgbImage {
-    let pts: Vec<Vector3<f32>> = mesh.vertices.iter().map(|v| view_from_mesh * Vector3::from(*v)).collect();
+    let pts: Vec<Vector3<f32>> = mesh
+        .vertices
+        .iter()
+        .map(|v| view_from_mesh * Vector3::from(*v))
+        .collect();
     let mut img = RgbImage::from_pixel(size, size, Rgb([255, 255, 255]));
     if pts.is_empty() {
         return img;
@@ -24,7 +28,11 @@ pub fn render_orthographic(mesh: &TriMesh, view_from_mesh: &Matrix3<f32>, size: 
     let centre = (lo + hi) * 0.5;
     let to_px = |p: &Vector3<f32>| {
         let half = size as f32 / 2.0;
-        ((p.x - centre.x) * scale + half, (p.y - centre.y) * scale + half, p.z)
+        (
+            (p.x - centre.x) * scale + half,
+            (p.y - centre.y) * scale + half,
+            p.z,
+        )
     };
     let mut zbuf = vec![f32::INFINITY; (size * size) as usize];
     for t in &mesh.triangles {

@@ -15,7 +15,10 @@ pub struct Ray<T: Real> {
 impl<T: Real> Ray<T> {
     /// A ray from `origin` along `dir` (normalised here; `dir` must be non-zero).
     pub fn new(origin: Vector3<T>, dir: Vector3<T>) -> Self {
-        Self { origin, dir: dir.normalize() }
+        Self {
+            origin,
+            dir: dir.normalize(),
+        }
     }
     /// The point at parameter `t` (metres along the ray).
     pub fn at(&self, t: T) -> Vector3<T> {

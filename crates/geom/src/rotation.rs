@@ -76,7 +76,11 @@ pub fn matrix_to_axis_angle<T: Real>(r: &Matrix3<T>) -> Vector3<T> {
     let two = T::one() + T::one();
     let cos = ((r.trace() - T::one()) / two).clamp(-T::one(), T::one());
     let theta = cos.acos();
-    let v = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]);
+    let v = Vector3::new(
+        r[(2, 1)] - r[(1, 2)],
+        r[(0, 2)] - r[(2, 0)],
+        r[(1, 0)] - r[(0, 1)],
+    );
     if theta.to_f64() < 1e-6 {
         return v / two;
     }
@@ -107,9 +111,7 @@ pub fn sixd_to_matrix<T: Real>(x: &Vector6<T>) -> Matrix3<T> {
 
 /// Intermediates of the 6-D map: `(b1, b2, b3, n1, n2, a2)`.
 #[allow(clippy::type_complexity)]
-fn sixd_parts<T: Real>(
-    x: &Vector6<T>,
-) -> (Vector3<T>, Vector3<T>, Vector3<T>, T, T, Vector3<T>) {
+fn sixd_parts<T: Real>(x: &Vector6<T>) -> (Vector3<T>, Vector3<T>, Vector3<T>, T, T, Vector3<T>) {
     // A tiny floor keeps degenerate inputs (zero or parallel columns) finite.
     let tiny = T::eps() * T::eps();
     let a1 = Vector3::new(x[0], x[1], x[2]);
@@ -143,7 +145,14 @@ pub fn sixd_to_matrix_vjp<T: Real>(x: &Vector6<T>, g: &Matrix3<T>) -> Vector6<T>
 
 /// The 6-D representation of a rotation matrix (its first two columns).
 pub fn matrix_to_sixd<T: Real>(r: &Matrix3<T>) -> Vector6<T> {
-    Vector6::new(r[(0, 0)], r[(1, 0)], r[(2, 0)], r[(0, 1)], r[(1, 1)], r[(2, 1)])
+    Vector6::new(
+        r[(0, 0)],
+        r[(1, 0)],
+        r[(2, 0)],
+        r[(0, 1)],
+        r[(1, 1)],
+        r[(2, 1)],
+    )
 }
 
 /// Elementary rotation about +Y (used for Blender bone roll): `[[c,0,s],[0,1,0],[−s,0,c]]`.
@@ -191,14 +200,26 @@ mod tests {
     fn axis_angle_vjp_matches_finite_differences() {
         // Generic angles, one just above and one just below the Taylor switch (both branches are
         // smooth there), and a tiny angle (the θ → 0 limit).
-        for x in [[0.3, -0.8, 1.1], [0.03, 0.03, -0.028], [0.02, -0.03, 0.01], [1e-7, 0.0, -2e-7], [2.9, 0.4, -0.2]] {
+        for x in [
+            [0.3, -0.8, 1.1],
+            [0.03, 0.03, -0.028],
+            [0.02, -0.03, 0.01],
+            [1e-7, 0.0, -2e-7],
+            [2.9, 0.4, -0.2],
+        ] {
             fd_check(aa, aa_vjp, x, 1e-7);
         }
     }
 
     #[test]
     fn axis_angle_is_a_rotation_and_round_trips() {
-        for x in [[0.3, -0.8, 1.1], [1e-9, 0.0, 0.0], [0.0, 3.1, 0.0], [0.04, 0.0, 0.0], [0.0, 0.0, 0.0]] {
+        for x in [
+            [0.3, -0.8, 1.1],
+            [1e-9, 0.0, 0.0],
+            [0.0, 3.1, 0.0],
+            [0.04, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+        ] {
             let w: Vector3<f64> = Vector3::from(x);
             let r = axis_angle_to_matrix(&w);
             assert!((r.transpose() * r - Matrix3::identity()).abs().max() < 1e-14);
@@ -231,7 +252,11 @@ mod tests {
         for x in [[0.0; 6], [1.0, 0.0, 0.0, 2.0, 0.0, 0.0]] {
             let v: Vector6<f64> = Vector6::from_row_slice(&x);
             assert!(sixd_to_matrix::<f64>(&v).iter().all(|a| a.is_finite()));
-            assert!(sixd_to_matrix_vjp::<f64>(&v, &g).iter().all(|a| a.is_finite()));
+            assert!(
+                sixd_to_matrix_vjp::<f64>(&v, &g)
+                    .iter()
+                    .all(|a| a.is_finite())
+            );
         }
         let r = axis_angle_to_matrix(&Vector3::new(0.4, -1.0, 0.2));
         assert!((sixd_to_matrix(&matrix_to_sixd(&r)) - r).abs().max() < 1e-14);

@@ -4,7 +4,7 @@
 //! coordinates: `depth_from_thermal.transform_point(&p_thermal)` is `p_depth`. Composition reads
 //! right to left: `depth_from_object = depth_from_world * world_from_object`.
 
-use crate::{GeomError, Real, Ray};
+use crate::{GeomError, Ray, Real};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::ops::Mul;
@@ -24,7 +24,10 @@ pub struct Rigid3<T: Real> {
 impl<T: Real> Rigid3<T> {
     /// The identity.
     pub fn identity() -> Self {
-        Self { rotation: Matrix3::identity(), translation: Vector3::zeros() }
+        Self {
+            rotation: Matrix3::identity(),
+            translation: Vector3::zeros(),
+        }
     }
 
     /// A rigid transform; fails if `rotation` is not a proper rotation (within 1e-4) or a value is
@@ -32,9 +35,14 @@ impl<T: Real> Rigid3<T> {
     pub fn new(rotation: Matrix3<T>, translation: Vector3<T>) -> Result<Self, GeomError> {
         check_rotation(&rotation)?;
         if translation.iter().any(|x| !x.is_finite()) {
-            return Err(GeomError::InvalidTransform("translation is not finite".into()));
+            return Err(GeomError::InvalidTransform(
+                "translation is not finite".into(),
+            ));
         }
-        Ok(Self { rotation, translation })
+        Ok(Self {
+            rotation,
+            translation,
+        })
     }
 
     /// Maps a point of frame b to frame a.
@@ -52,13 +60,19 @@ impl<T: Real> Rigid3<T> {
     /// Maps a ray of frame b to frame a.
     #[inline]
     pub fn transform_ray(&self, ray_b: &Ray<T>) -> Ray<T> {
-        Ray { origin: self.transform_point(&ray_b.origin), dir: self.transform_vector(&ray_b.dir) }
+        Ray {
+            origin: self.transform_point(&ray_b.origin),
+            dir: self.transform_vector(&ray_b.dir),
+        }
     }
 
     /// `b_from_a` from `a_from_b`.
     pub fn inverse(&self) -> Self {
         let rt = self.rotation.transpose();
-        Self { rotation: rt, translation: -(rt * self.translation) }
+        Self {
+            rotation: rt,
+            translation: -(rt * self.translation),
+        }
     }
 
     /// Converts the scalar type.
@@ -96,19 +110,31 @@ pub struct Similarity3<T: Real> {
 impl<T: Real> Similarity3<T> {
     /// The identity.
     pub fn identity() -> Self {
-        Self { rotation: Matrix3::identity(), translation: Vector3::zeros(), scale: T::one() }
+        Self {
+            rotation: Matrix3::identity(),
+            translation: Vector3::zeros(),
+            scale: T::one(),
+        }
     }
 
     /// A similarity; fails on a non-rotation, a non-positive or non-finite scale.
     pub fn new(rotation: Matrix3<T>, translation: Vector3<T>, scale: T) -> Result<Self, GeomError> {
         check_rotation(&rotation)?;
         if !(scale.is_finite() && scale > T::zero()) {
-            return Err(GeomError::InvalidTransform(format!("scale must be positive, got {scale:?}")));
+            return Err(GeomError::InvalidTransform(format!(
+                "scale must be positive, got {scale:?}"
+            )));
         }
         if translation.iter().any(|x| !x.is_finite()) {
-            return Err(GeomError::InvalidTransform("translation is not finite".into()));
+            return Err(GeomError::InvalidTransform(
+                "translation is not finite".into(),
+            ));
         }
-        Ok(Self { rotation, translation, scale })
+        Ok(Self {
+            rotation,
+            translation,
+            scale,
+        })
     }
 
     /// Maps a point of frame b to frame a.
@@ -133,14 +159,21 @@ impl<T: Real> Similarity3<T> {
     pub fn inverse(&self) -> Self {
         let rt = self.rotation.transpose();
         let inv_s = T::one() / self.scale;
-        Self { rotation: rt, translation: -(rt * self.translation) * inv_s, scale: inv_s }
+        Self {
+            rotation: rt,
+            translation: -(rt * self.translation) * inv_s,
+            scale: inv_s,
+        }
     }
 
     /// Maps a ray of frame b to frame a; the direction stays unit length, so ray parameters
     /// scale by `scale`.
     #[inline]
     pub fn transform_ray(&self, ray_b: &Ray<T>) -> Ray<T> {
-        Ray { origin: self.transform_point(&ray_b.origin), dir: self.transform_dir(&ray_b.dir) }
+        Ray {
+            origin: self.transform_point(&ray_b.origin),
+            dir: self.transform_dir(&ray_b.dir),
+        }
     }
 }
 
@@ -158,9 +191,14 @@ impl<T: Real> Mul for Similarity3<T> {
 
 fn check_rotation<T: Real>(r: &Matrix3<T>) -> Result<(), GeomError> {
     if r.iter().any(|x| !x.is_finite()) {
-        return Err(GeomError::InvalidTransform("rotation has non-finite entries".into()));
+        return Err(GeomError::InvalidTransform(
+            "rotation has non-finite entries".into(),
+        ));
     }
-    let err = (r.transpose() * r - Matrix3::identity()).abs().max().to_f64();
+    let err = (r.transpose() * r - Matrix3::identity())
+        .abs()
+        .max()
+        .to_f64();
     let det = r.determinant().to_f64();
     if err > ROTATION_TOL || (det - 1.0).abs() > ROTATION_TOL {
         return Err(GeomError::InvalidTransform(format!(
@@ -212,7 +250,9 @@ mod tests {
         let via = a_from_b.transform_point(&b_from_c.transform_point(&p_c));
         let direct = (a_from_b * b_from_c).transform_point(&p_c);
         assert!((via - direct).norm() < 1e-12);
-        let back = a_from_b.inverse().transform_point(&a_from_b.transform_point(&p_c));
+        let back = a_from_b
+            .inverse()
+            .transform_point(&a_from_b.transform_point(&p_c));
         assert!((back - p_c).norm() < 1e-12);
     }
 
@@ -238,7 +278,10 @@ mod tests {
         assert!(Rigid3::new(reflection, Vector3::zeros()).is_err());
         assert!(Similarity3::new(Matrix3::identity(), Vector3::zeros(), -1.0).is_err());
         assert!(Similarity3::new(Matrix3::identity(), Vector3::zeros(), f64::NAN).is_err());
-        let f = RigidFile { rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], translation_m: [f64::INFINITY, 0.0, 0.0] };
+        let f = RigidFile {
+            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            translation_m: [f64::INFINITY, 0.0, 0.0],
+        };
         assert!(f.to_rigid().is_err());
     }
 }

@@ -21,12 +21,16 @@
 //!   loss is kept; the `top_k` distinct ones are reported.
 
 use crate::ReconError;
+use irmirror_body::model::{BodyGrad, OutputGrads};
 use irmirror_body::prior::PosePrior;
 use irmirror_body::{BodyModel, Pose};
-use irmirror_body::model::{BodyGrad, OutputGrads};
 use irmirror_capture::Image;
-use irmirror_geom::rotation::{axis_angle_to_matrix, axis_angle_to_matrix_vjp, matrix_to_axis_angle};
-use irmirror_render::occupancy::{Aggregation, Culling, OccupancyGrad, OccupancyParams, SoftRenderer};
+use irmirror_geom::rotation::{
+    axis_angle_to_matrix, axis_angle_to_matrix_vjp, matrix_to_axis_angle,
+};
+use irmirror_render::occupancy::{
+    Aggregation, Culling, OccupancyGrad, OccupancyParams, SoftRenderer,
+};
 use irmirror_render::reflect::ReflectedRays;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
@@ -180,10 +184,16 @@ pub fn edge_distance(mask: &Image<bool>) -> Image<f64> {
     for y in 0..h {
         for x in 0..w {
             let m = mask.data[y * w + x];
-            let edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
-                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64 && mask.data[ny as usize * w + nx as usize] != m
-            });
+            let edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|&(dx, dy)| {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    nx >= 0
+                        && ny >= 0
+                        && nx < w as i64
+                        && ny < h as i64
+                        && mask.data[ny as usize * w + nx as usize] != m
+                });
             if edge {
                 d[y * w + x] = 0.0;
             }
@@ -205,9 +215,23 @@ pub fn edge_distance(mask: &Image<bool>) -> Image<f64> {
         }
     };
     let (a, b) = (1.0, std::f64::consts::SQRT_2);
-    pass(&mut d, (0..w).collect(), (0..h).collect(), [(-1, 0, a), (0, -1, a), (-1, -1, b), (1, -1, b)]);
-    pass(&mut d, (0..w).rev().collect(), (0..h).rev().collect(), [(1, 0, a), (0, 1, a), (1, 1, b), (-1, 1, b)]);
-    Image { width: mask.width, height: mask.height, data: d }
+    pass(
+        &mut d,
+        (0..w).collect(),
+        (0..h).collect(),
+        [(-1, 0, a), (0, -1, a), (-1, -1, b), (1, -1, b)],
+    );
+    pass(
+        &mut d,
+        (0..w).rev().collect(),
+        (0..h).rev().collect(),
+        [(1, 0, a), (0, 1, a), (1, 1, b), (-1, 1, b)],
+    );
+    Image {
+        width: mask.width,
+        height: mask.height,
+        data: d,
+    }
 }
 
 /// Soft IoU of occupancies `v` against targets `t` (same rays) and `∂(1 − IoU)/∂v`.
@@ -233,7 +257,11 @@ pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> 
     let z = up.normalize();
     let mut f = facing - z * z.dot(facing);
     if f.norm() < 1e-9 {
-        f = if z.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        f = if z.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
         f -= z * z.dot(&f);
     }
     let front = f.normalize();
@@ -247,7 +275,9 @@ pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> 
 /// the shape basis' origin (coefficients 0 are a 1.84 m body: 9 % too tall, which biases the
 /// distance of every fit).
 pub fn mean_adult(model: &BodyModel) -> Result<irmirror_body::ShapedBody<f64>, ReconError> {
-    model.shaped_phenotype::<f64>(&irmirror_body::Phenotype::default()).map_err(|e| ReconError::Prior(e.to_string()))
+    model
+        .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
+        .map_err(|e| ReconError::Prior(e.to_string()))
 }
 
 /// Adam state over a flat parameter vector.
@@ -259,7 +289,11 @@ struct Adam {
 
 impl Adam {
     fn new(n: usize) -> Self {
-        Self { m: vec![0.0; n], v: vec![0.0; n], t: 0 }
+        Self {
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            t: 0,
+        }
     }
     fn step(&mut self, g: &[f64], lr: &[f64], out: &mut [f64]) {
         self.t += 1;
@@ -288,9 +322,15 @@ pub struct HumanState {
 impl HumanProblem<'_> {
     /// The pose of a state (36 rotations; root first).
     pub fn pose(&self, st: &HumanState) -> Result<Pose<f64>, ReconError> {
-        let mut rotations = self.prior.decode(&st.latent).map_err(|e| ReconError::Prior(e.to_string()))?;
+        let mut rotations = self
+            .prior
+            .decode(&st.latent)
+            .map_err(|e| ReconError::Prior(e.to_string()))?;
         rotations[0] = st.rotation;
-        Ok(Pose { rotations, translation: st.translation })
+        Ok(Pose {
+            rotations,
+            translation: st.translation,
+        })
     }
 
     /// Buffers reused across steps (allocation-free after the first step).
@@ -301,7 +341,11 @@ impl HumanProblem<'_> {
             posed: self.model.posed_buffers(),
             renderer: None,
             occ_grad: OccupancyGrad::default(),
-            body_grad: BodyGrad { rotations: vec![], translation: Vector3::zeros(), shape: vec![] },
+            body_grad: BodyGrad {
+                rotations: vec![],
+                translation: Vector3::zeros(),
+                shape: vec![],
+            },
             d_value: Vec::new(),
         })
     }
@@ -323,35 +367,77 @@ impl HumanProblem<'_> {
         grad: Option<&mut [f64]>,
     ) -> Result<(f64, f64), ReconError> {
         let err = |e: String| ReconError::Prior(e);
-        let st = HumanState { translation: *t, rotation: axis_angle_to_matrix(omega) * base, latent: latent.to_vec() };
+        let st = HumanState {
+            translation: *t,
+            rotation: axis_angle_to_matrix(omega) * base,
+            latent: latent.to_vec(),
+        };
         let pose = self.pose(&st)?;
-        self.model.pose_into(&ws.shaped, &pose, &mut ws.posed).map_err(|e| err(e.to_string()))?;
-        let r = ws.renderer.get_or_insert_with(|| SoftRenderer::new(&ws.posed.vertices, &self.model.asset.faces));
+        self.model
+            .pose_into(&ws.shaped, &pose, &mut ws.posed)
+            .map_err(|e| err(e.to_string()))?;
+        let r = ws
+            .renderer
+            .get_or_insert_with(|| SoftRenderer::new(&ws.posed.vertices, &self.model.asset.faces));
         r.set_vertices(&ws.posed.vertices);
-        let params = OccupancyParams { sigma_m2, aggregation: cfg.aggregation, ..OccupancyParams::default() };
+        let params = OccupancyParams {
+            sigma_m2,
+            aggregation: cfg.aggregation,
+            ..OccupancyParams::default()
+        };
         let occ = r.forward(rays, &params, Culling::Bvh);
         let (l_iou, iou) = soft_iou(&occ.value, target, &mut ws.d_value);
         let prior: f64 = latent.iter().map(|x| x * x).sum();
         let up = self.up.normalize();
-        let mut loss = l_iou + cfg.w_prior * prior + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
+        let mut loss = l_iou
+            + cfg.w_prior * prior
+            + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
         // Floor: the lowest vertex on it (its subgradient goes to that vertex alone).
         let floor = self.floor.filter(|_| cfg.w_floor > 0.0).map(|f| {
-            let (k, h) = ws.posed.vertices.iter().enumerate().map(|(k, v)| (k, f.height(v))).min_by(|a, b| a.1.total_cmp(&b.1)).expect("a body has vertices");
+            let (k, h) = ws
+                .posed
+                .vertices
+                .iter()
+                .enumerate()
+                .map(|(k, v)| (k, f.height(v)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("a body has vertices");
             let e = h / cfg.floor_sigma_m;
             loss += cfg.w_floor * e * e;
             (k, f.up * (2.0 * cfg.w_floor * e / cfg.floor_sigma_m))
         });
-        let Some(g) = grad else { return Ok((loss, iou)) };
-        r.backward(rays, &occ, &ws.d_value, &params, Culling::Bvh, &mut ws.occ_grad);
+        let Some(g) = grad else {
+            return Ok((loss, iou));
+        };
+        r.backward(
+            rays,
+            &occ,
+            &ws.d_value,
+            &params,
+            Culling::Bvh,
+            &mut ws.occ_grad,
+        );
         if let Some((k, d)) = floor {
             ws.occ_grad.vertices[k] += d;
         }
         let bg = &mut ws.body_grad;
-        self.model.backward(&ws.shaped, &pose, &mut ws.posed, OutputGrads { vertices: Some(&ws.occ_grad.vertices), ..Default::default() }, bg);
+        self.model.backward(
+            &ws.shaped,
+            &pose,
+            &mut ws.posed,
+            OutputGrads {
+                vertices: Some(&ws.occ_grad.vertices),
+                ..Default::default()
+            },
+            bg,
+        );
         // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
         bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
         let d_omega = axis_angle_to_matrix_vjp(omega, &(bg.rotations[0] * base.transpose()));
-        let d_lat = self.prior.decode_vjp(latent, &bg.rotations).map_err(|e| err(e.to_string()))?;
+        let d_lat = self
+            .prior
+            .decode_vjp(latent, &bg.rotations)
+            .map_err(|e| err(e.to_string()))?;
         g[..3].copy_from_slice(bg.translation.as_slice());
         g[3..6].copy_from_slice(d_omega.as_slice());
         for (k, (gk, dk)) in g[6..].iter_mut().zip(&d_lat).enumerate() {
@@ -362,23 +448,51 @@ impl HumanProblem<'_> {
 
     /// Targets of all rays (1 in the mask).
     pub fn targets(&self) -> Vec<f64> {
-        self.rays.pixel.iter().map(|&p| f64::from(u8::from(self.mask.data[p as usize]))).collect()
+        self.rays
+            .pixel
+            .iter()
+            .map(|&p| f64::from(u8::from(self.mask.data[p as usize])))
+            .collect()
     }
 
     /// Loss of a state on all rays at the final σ, and its soft IoU.
     pub fn full_loss(&self, st: &HumanState, cfg: &HumanConfig) -> Result<(f64, f64), ReconError> {
         let mut ws = self.scratch()?;
-        self.loss_grad(&mut ws, &st.translation, &Vector3::zeros(), &st.rotation, &st.latent, self.rays, &self.targets(), cfg.sigma_m2[1], cfg, None)
+        self.loss_grad(
+            &mut ws,
+            &st.translation,
+            &Vector3::zeros(),
+            &st.rotation,
+            &st.latent,
+            self.rays,
+            &self.targets(),
+            cfg.sigma_m2[1],
+            cfg,
+            None,
+        )
     }
 
     /// Initial states (deterministic for `seed`).
-    pub fn initial_states(&self, cfg: &HumanConfig, seed: u64) -> Result<Vec<HumanState>, ReconError> {
-        let mask_rays: Vec<usize> = (0..self.rays.len()).filter(|&i| self.mask.data[self.rays.pixel[i] as usize]).collect();
+    pub fn initial_states(
+        &self,
+        cfg: &HumanConfig,
+        seed: u64,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        let mask_rays: Vec<usize> = (0..self.rays.len())
+            .filter(|&i| self.mask.data[self.rays.pixel[i] as usize])
+            .collect();
         if mask_rays.is_empty() {
             return Err(ReconError::NoMaskRays);
         }
-        let o = mask_rays.iter().fold(Vector3::zeros(), |a, &i| a + self.rays.origin[i]) / mask_rays.len() as f64;
-        let d = mask_rays.iter().fold(Vector3::zeros(), |a, &i| a + self.rays.dir[i]).try_normalize(1e-12).ok_or(ReconError::NoMaskRays)?;
+        let o = mask_rays
+            .iter()
+            .fold(Vector3::zeros(), |a, &i| a + self.rays.origin[i])
+            / mask_rays.len() as f64;
+        let d = mask_rays
+            .iter()
+            .fold(Vector3::zeros(), |a, &i| a + self.rays.dir[i])
+            .try_normalize(1e-12)
+            .ok_or(ReconError::NoMaskRays)?;
         let mut rng = irmirror_geom::rng::seeded(seed, 21);
         let n = cfg.inits.max(1);
         let mut out = Vec::with_capacity(n);
@@ -386,10 +500,20 @@ impl HumanProblem<'_> {
         let root_height = match self.floor {
             Some(_) => {
                 // Anny's own frame is Z up: the identity root stands upright.
-                let st = HumanState { translation: Vector3::zeros(), rotation: Matrix3::identity(), latent: vec![0.0; irmirror_body::prior::LATENT] };
+                let st = HumanState {
+                    translation: Vector3::zeros(),
+                    rotation: Matrix3::identity(),
+                    latent: vec![0.0; irmirror_body::prior::LATENT],
+                };
                 let mut ws = self.scratch()?;
-                self.model.pose_into(&ws.shaped, &self.pose(&st)?, &mut ws.posed).map_err(|e| ReconError::Prior(e.to_string()))?;
-                -ws.posed.vertices.iter().map(|v| v.z).fold(f64::INFINITY, f64::min)
+                self.model
+                    .pose_into(&ws.shaped, &self.pose(&st)?, &mut ws.posed)
+                    .map_err(|e| ReconError::Prior(e.to_string()))?;
+                -ws.posed
+                    .vertices
+                    .iter()
+                    .map(|v| v.z)
+                    .fold(f64::INFINITY, f64::min)
             }
             None => 0.0,
         };
@@ -411,16 +535,31 @@ impl HumanProblem<'_> {
             let latent: Vec<f64> = if k == 0 {
                 vec![0.0; irmirror_body::prior::LATENT]
             } else {
-                (0..irmirror_body::prior::LATENT).map(|_| { let x: f64 = StandardNormal.sample(&mut rng); 0.5 * x }).collect::<Vec<f64>>()
+                (0..irmirror_body::prior::LATENT)
+                    .map(|_| {
+                        let x: f64 = StandardNormal.sample(&mut rng);
+                        0.5 * x
+                    })
+                    .collect::<Vec<f64>>()
             };
-            out.push(HumanState { translation: p, rotation, latent });
+            out.push(HumanState {
+                translation: p,
+                rotation,
+                latent,
+            });
         }
         Ok(out)
     }
 
     /// Runs one hypothesis from `init`; returns the final state and the per-step loss, or `None`
     /// if it diverged.
-    pub fn run(&self, init: &HumanState, cfg: &HumanConfig, edge_dist: &Image<f64>, seed: u64) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
+    pub fn run(
+        &self,
+        init: &HumanState,
+        cfg: &HumanConfig,
+        edge_dist: &Image<f64>,
+        seed: u64,
+    ) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
         let mut ws = self.scratch()?;
         let mut st = init.clone();
         let base = st.rotation;
@@ -432,8 +571,18 @@ impl HumanProblem<'_> {
         lr.extend(vec![cfg.lr_latent; n_lat]);
         let mut rng = irmirror_geom::rng::seeded(seed, 31);
         let target_all = self.targets();
-        let e_all: Vec<f64> = self.rays.pixel.iter().map(|&p| edge_dist.data[p as usize]).collect();
-        let (mut sub, mut target, mut keys, mut idx) = (ReflectedRays::default(), Vec::new(), Vec::<(f64, usize)>::new(), Vec::new());
+        let e_all: Vec<f64> = self
+            .rays
+            .pixel
+            .iter()
+            .map(|&p| edge_dist.data[p as usize])
+            .collect();
+        let (mut sub, mut target, mut keys, mut idx) = (
+            ReflectedRays::default(),
+            Vec::new(),
+            Vec::<(f64, usize)>::new(),
+            Vec::new(),
+        );
         let mut curve = Vec::with_capacity(cfg.iterations);
         let (mut g, mut step) = (vec![0.0; 6 + n_lat], vec![0.0; 6 + n_lat]);
         let iters = cfg.iterations.max(1);
@@ -443,7 +592,10 @@ impl HumanProblem<'_> {
             // Draw the rays (Efraimidis–Spirakis weighted sampling without replacement).
             let m = cfg.rays_per_iteration.min(self.rays.len());
             let (alpha, tau) = if cfg.edge_sampling {
-                (cfg.edge_mix * progress, cfg.edge_tau_px[0] + (cfg.edge_tau_px[1] - cfg.edge_tau_px[0]) * progress)
+                (
+                    cfg.edge_mix * progress,
+                    cfg.edge_tau_px[0] + (cfg.edge_tau_px[1] - cfg.edge_tau_px[0]) * progress,
+                )
             } else {
                 (0.0, 1.0)
             };
@@ -464,7 +616,18 @@ impl HumanProblem<'_> {
             target.clear();
             target.extend(idx.iter().map(|&i| target_all[i]));
 
-            let (loss, _) = self.loss_grad(&mut ws, &st.translation, &omega, &base, &st.latent, &sub, &target, sigma, cfg, Some(&mut g))?;
+            let (loss, _) = self.loss_grad(
+                &mut ws,
+                &st.translation,
+                &omega,
+                &base,
+                &st.latent,
+                &sub,
+                &target,
+                sigma,
+                cfg,
+                Some(&mut g),
+            )?;
             if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
                 return Ok(None);
             }
@@ -494,7 +657,12 @@ pub struct Scratch {
 }
 
 /// Fits the person: every initialisation in parallel, best first, distinct top-k.
-pub fn fit_human(problem: &HumanProblem<'_>, cfg: &HumanConfig, seed: u64, progress: &(dyn Fn(usize) + Sync)) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
+pub fn fit_human(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    seed: u64,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
     let inits = problem.initial_states(cfg, seed)?;
     let edge_dist = edge_distance(problem.mask);
     type Run = Option<(usize, HumanState, Vec<f64>)>;
@@ -502,7 +670,12 @@ pub fn fit_human(problem: &HumanProblem<'_>, cfg: &HumanConfig, seed: u64, progr
         .par_iter()
         .enumerate()
         .map(|(k, init)| {
-            let r = problem.run(init, cfg, &edge_dist, seed.wrapping_mul(1000).wrapping_add(k as u64))?;
+            let r = problem.run(
+                init,
+                cfg,
+                &edge_dist,
+                seed.wrapping_mul(1000).wrapping_add(k as u64),
+            )?;
             progress(k);
             Ok(r.map(|(s, c)| (k, s, c)))
         })
@@ -539,14 +712,28 @@ pub fn fit_human(problem: &HumanProblem<'_>, cfg: &HumanConfig, seed: u64, progr
     for (h, s) in scored {
         let distinct = kept.iter().all(|(_, k)| {
             let far = (k.translation - s.translation).norm() > 0.25;
-            let turned = (k.rotation.transpose() * s.rotation).trace() < 1.0 + 2.0 * 45f64.to_radians().cos();
+            let turned = (k.rotation.transpose() * s.rotation).trace()
+                < 1.0 + 2.0 * 45f64.to_radians().cos();
             far || turned
         });
         if distinct && kept.len() < cfg.top_k.max(1) {
             kept.push((h, s));
         }
     }
-    let mask_rays = problem.rays.pixel.iter().filter(|&&p| problem.mask.data[p as usize]).count();
+    let mask_rays = problem
+        .rays
+        .pixel
+        .iter()
+        .filter(|&&p| problem.mask.data[p as usize])
+        .count();
     let (hyps, states): (Vec<Hypothesis>, Vec<HumanState>) = kept.into_iter().unzip();
-    Ok((HumanFit { hypotheses: hyps, diverged, rays: problem.rays.len(), mask_rays }, states))
+    Ok((
+        HumanFit {
+            hypotheses: hyps,
+            diverged,
+            rays: problem.rays.len(),
+            mask_rays,
+        },
+        states,
+    ))
 }

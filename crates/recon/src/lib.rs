@@ -23,7 +23,9 @@ pub use preprocess::{PreprocessConfig, Preprocessed, Threshold, preprocess};
 #[derive(Debug, thiserror::Error)]
 pub enum ReconError {
     /// The capture has no usable object pixels in the thermal view.
-    #[error("no object pixel of the capture falls inside the thermal image: check the masks and depth_from_thermal")]
+    #[error(
+        "no object pixel of the capture falls inside the thermal image: check the masks and depth_from_thermal"
+    )]
     NoObjectPixels,
     /// An object category without a prior.
     #[error("no shape prior for object category {category:?} (known: {known})")]
@@ -40,10 +42,14 @@ pub enum ReconError {
         pixels: usize,
     },
     /// No near-horizontal plane under the objects.
-    #[error("no support plane (table or ground) found in the depth image: segmentation needs one to find objects without masks; give masks")]
+    #[error(
+        "no support plane (table or ground) found in the depth image: segmentation needs one to find objects without masks; give masks"
+    )]
     NoSupportPlane,
     /// Fewer clusters than objects without masks.
-    #[error("segmentation found {found} object clusters above the support plane but the capture lists {wanted} objects without masks; give masks")]
+    #[error(
+        "segmentation found {found} object clusters above the support plane but the capture lists {wanted} objects without masks; give masks"
+    )]
     Segmentation {
         /// Objects without masks.
         wanted: usize,
@@ -51,10 +57,14 @@ pub enum ReconError {
         found: usize,
     },
     /// No pixel of the reflection mask lies on a fitted object.
-    #[error("no pixel of the reflection mask lies on a fitted object, so no reflected ray can see the person; check the object fit (stage 1) and depth_from_thermal")]
+    #[error(
+        "no pixel of the reflection mask lies on a fitted object, so no reflected ray can see the person; check the object fit (stage 1) and depth_from_thermal"
+    )]
     NoMaskRays,
     /// Every initialisation of the human fit diverged.
-    #[error("the human fit diverged from all {inits} initialisations (non-finite loss or gradient)")]
+    #[error(
+        "the human fit diverged from all {inits} initialisations (non-finite loss or gradient)"
+    )]
     Diverged {
         /// Initialisations tried.
         inits: usize,
@@ -66,7 +76,9 @@ pub enum ReconError {
     #[error("object prior: {0}")]
     ObjectPrior(#[from] irmirror_sdf::SdfError),
     /// No pixel on an object is warmer than the background by the threshold.
-    #[error("no reflection: no object pixel is warmer than its background by {threshold_k:.3} K (largest rise {max_rise_k:.3} K)")]
+    #[error(
+        "no reflection: no object pixel is warmer than its background by {threshold_k:.3} K (largest rise {max_rise_k:.3} K)"
+    )]
     NoReflection {
         /// The threshold used, K.
         threshold_k: f64,

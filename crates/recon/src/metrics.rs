@@ -13,7 +13,8 @@ pub fn normalised_distance(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
     let norm = |s: &[Vec<f64>]| -> Option<Vec<DVector<f64>>> {
         let pts: Vec<DVector<f64>> = s.iter().map(|p| DVector::from_vec(p.clone())).collect();
         let mean = pts.iter().fold(DVector::zeros(pts[0].len()), |m, p| m + p) / pts.len() as f64;
-        let rms = (pts.iter().map(|p| (p - &mean).norm_squared()).sum::<f64>() / pts.len() as f64).sqrt();
+        let rms =
+            (pts.iter().map(|p| (p - &mean).norm_squared()).sum::<f64>() / pts.len() as f64).sqrt();
         (rms > 1e-12).then(|| pts.iter().map(|p| (p - &mean) / rms).collect())
     };
     let (na, nb) = (norm(a)?, norm(b)?);
@@ -25,7 +26,19 @@ pub fn mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
     if a.len() != b.len() || a.is_empty() {
         return None;
     }
-    Some(a.iter().zip(b).map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt()).sum::<f64>() / a.len() as f64)
+    Some(
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| {
+                x.iter()
+                    .zip(y)
+                    .map(|(u, v)| (u - v).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .sum::<f64>()
+            / a.len() as f64,
+    )
 }
 
 /// MPJPE after the best similarity alignment of `a` onto `b` (Procrustes with scale, Umeyama),
@@ -36,7 +49,10 @@ pub fn pa_mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
     }
     let v = |p: &Vec<f64>| nalgebra::Vector3::new(p[0], p[1], p[2]);
     let n = a.len() as f64;
-    let (ma, mb) = (a.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n, b.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n);
+    let (ma, mb) = (
+        a.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n,
+        b.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n,
+    );
     let mut cov = nalgebra::Matrix3::zeros();
     let mut var_a = 0.0;
     for (x, y) in a.iter().zip(b) {
@@ -55,10 +71,13 @@ pub fn pa_mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
     }
     let r = u * d * vt;
     let s = (svd.singular_values.component_mul(&d.diagonal())).sum() / var_a;
-    let aligned: Vec<Vec<f64>> = a.iter().map(|x| {
-        let p = mb + r * (v(x) - ma) * s;
-        vec![p.x, p.y, p.z]
-    }).collect();
+    let aligned: Vec<Vec<f64>> = a
+        .iter()
+        .map(|x| {
+            let p = mb + r * (v(x) - ma) * s;
+            vec![p.x, p.y, p.z]
+        })
+        .collect();
     mpjpe(&aligned, b)
 }
 
@@ -74,7 +93,11 @@ pub fn mean_ci95(x: &[f64]) -> Option<(f64, f64)> {
     }
     let sd = (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
     // Two-sided 97.5 % quantiles of Student's t for 1…30 degrees of freedom, then normal.
-    const T: [f64; 30] = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042];
+    const T: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+        2.052, 2.048, 2.045, 2.042,
+    ];
     let t = T.get(n - 2).copied().unwrap_or(1.96);
     Some((m, t * sd / (n as f64).sqrt()))
 }
@@ -87,10 +110,14 @@ mod tests {
     fn procrustes_removes_similarity_and_keeps_shape_differences() {
         let a = pts();
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.5, 1.1);
-        let b: Vec<Vec<f64>> = a.iter().map(|p| {
-            let q = rot * nalgebra::Vector3::new(p[0], p[1], p[2]) * 2.5 + nalgebra::Vector3::new(1.0, -2.0, 0.5);
-            vec![q.x, q.y, q.z]
-        }).collect();
+        let b: Vec<Vec<f64>> = a
+            .iter()
+            .map(|p| {
+                let q = rot * nalgebra::Vector3::new(p[0], p[1], p[2]) * 2.5
+                    + nalgebra::Vector3::new(1.0, -2.0, 0.5);
+                vec![q.x, q.y, q.z]
+            })
+            .collect();
         assert!(pa_mpjpe(&a, &b).unwrap() < 1e-9);
         assert!(mpjpe(&a, &b).unwrap() > 0.5);
         // A genuine shape change survives the alignment.
@@ -110,14 +137,22 @@ mod tests {
     }
 
     fn pts() -> Vec<Vec<f64>> {
-        vec![vec![0.0, 0.0, 0.0], vec![1.0, 0.0, 0.0], vec![0.0, 2.0, 0.0], vec![0.0, 0.0, 3.0]]
+        vec![
+            vec![0.0, 0.0, 0.0],
+            vec![1.0, 0.0, 0.0],
+            vec![0.0, 2.0, 0.0],
+            vec![0.0, 0.0, 3.0],
+        ]
     }
 
     #[test]
     fn identity_and_similar_copies_score_zero() {
         let a = pts();
         assert_eq!(normalised_distance(&a, &a), Some(0.0));
-        let scaled: Vec<Vec<f64>> = a.iter().map(|p| p.iter().map(|x| 2.5 * x + 7.0).collect()).collect();
+        let scaled: Vec<Vec<f64>> = a
+            .iter()
+            .map(|p| p.iter().map(|x| 2.5 * x + 7.0).collect())
+            .collect();
         assert!(normalised_distance(&a, &scaled).unwrap() < 1e-12);
         assert!(mpjpe(&a, &scaled).unwrap() > 1.0);
     }
@@ -132,6 +167,10 @@ mod tests {
         let d = vec![vec![0.0, 0.0, 0.0], vec![1.0, 0.0, 0.0]];
         assert!((mpjpe(&c, &d).unwrap() - 0.1).abs() < 1e-12);
         assert_eq!(normalised_distance(&a, &a[..1]), None);
-        assert_eq!(normalised_distance(&[vec![1.0], vec![1.0]], &[vec![1.0], vec![2.0]]), None, "degenerate set");
+        assert_eq!(
+            normalised_distance(&[vec![1.0], vec![1.0]], &[vec![1.0], vec![2.0]]),
+            None,
+            "degenerate set"
+        );
     }
 }

@@ -15,7 +15,8 @@ fn filter(img: &Image<bool>, radius: u32, any: bool) -> Image<bool> {
                 for dx in -r..=r {
                     let (nx, ny) = (x + dx, y + dy);
                     // Outside the image counts as background for dilation and erosion alike.
-                    let v = nx >= 0 && ny >= 0 && nx < w && ny < h && img.data[(ny * w + nx) as usize];
+                    let v =
+                        nx >= 0 && ny >= 0 && nx < w && ny < h && img.data[(ny * w + nx) as usize];
                     if any && v {
                         hit = true;
                         break 'outer;
@@ -29,7 +30,11 @@ fn filter(img: &Image<bool>, radius: u32, any: bool) -> Image<bool> {
             hit
         })
         .collect();
-    Image { width: img.width, height: img.height, data }
+    Image {
+        width: img.width,
+        height: img.height,
+        data,
+    }
 }
 
 /// Dilation: a pixel is set if any pixel within `radius` (Chebyshev) is.
@@ -99,7 +104,11 @@ pub fn edges(img: &Image<bool>) -> Image<bool> {
             at(x, y) && !(at(x + 1, y) && at(x - 1, y) && at(x, y + 1) && at(x, y - 1))
         })
         .collect();
-    Image { width: img.width, height: img.height, data }
+    Image {
+        width: img.width,
+        height: img.height,
+        data,
+    }
 }
 
 #[cfg(test)]
@@ -107,7 +116,14 @@ mod tests {
     use super::*;
 
     fn img(rows: &[&str]) -> Image<bool> {
-        Image { width: rows[0].len() as u32, height: rows.len() as u32, data: rows.iter().flat_map(|r| r.chars().map(|c| c == '#')).collect() }
+        Image {
+            width: rows[0].len() as u32,
+            height: rows.len() as u32,
+            data: rows
+                .iter()
+                .flat_map(|r| r.chars().map(|c| c == '#'))
+                .collect(),
+        }
     }
 
     #[test]
@@ -119,7 +135,10 @@ mod tests {
         // The hole is filled.
         assert!(close(&b, 1).data[7]);
         let specks = img(&["#.....", "...##.", "...##.", "#....."]);
-        assert_eq!(remove_small_components(&specks, 2), img(&["......", "...##.", "...##.", "......"]));
+        assert_eq!(
+            remove_small_components(&specks, 2),
+            img(&["......", "...##.", "...##.", "......"])
+        );
         let e = edges(&img(&["...", ".#.", "..."]));
         assert_eq!(e.data.iter().filter(|x| **x).count(), 1);
         let full = img(&["###", "###", "###"]);

@@ -36,17 +36,17 @@ use crate::ReconError;
 use crate::morphology::dilate;
 use crate::plane::Plane;
 use irmirror_capture::Image;
+use irmirror_geom::TriMesh;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_geom::{PinholeCamera, Similarity3};
 use irmirror_render::sdf::{PlacedSdf, Sdf};
-use irmirror_geom::TriMesh;
 use irmirror_render::shapes::Shape;
 use irmirror_sdf::placed::{PlacedFitConfig, PlacedObservation, fit_placed};
 use irmirror_sdf::{Category, LatentSdf, SdfNet};
-use std::sync::Arc;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// A category's shape family: parameters mapped from the unit box.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,7 +72,10 @@ impl Family {
             "mug" | "cup" => Ok(Self::Mug),
             "car" => Ok(Self::Car),
             "sphere" | "ball" => Ok(Self::Sphere),
-            other => Err(ReconError::UnknownCategory { category: other.into(), known: Self::KNOWN.join(", ") }),
+            other => Err(ReconError::UnknownCategory {
+                category: other.into(),
+                known: Self::KNOWN.join(", "),
+            }),
         }
     }
 
@@ -92,12 +95,26 @@ impl Family {
 
     /// The shape for unit-box parameters `u` (clamped).
     pub fn shape(self, u: &[f64]) -> Shape {
-        let p: Vec<f64> = self.ranges().iter().zip(u).map(|(&(lo, hi), &x)| lo + (hi - lo) * x.clamp(0.0, 1.0)).collect();
+        let p: Vec<f64> = self
+            .ranges()
+            .iter()
+            .zip(u)
+            .map(|(&(lo, hi), &x)| lo + (hi - lo) * x.clamp(0.0, 1.0))
+            .collect();
         match self {
             Self::Sphere => Shape::Sphere,
-            Self::Bowl => Shape::Bowl { cut: p[0], wall: p[1] },
-            Self::Mug => Shape::Mug { aspect: p[0], wall: p[1] },
-            Self::Car => Shape::Car { cabin: p[0], height: p[1] },
+            Self::Bowl => Shape::Bowl {
+                cut: p[0],
+                wall: p[1],
+            },
+            Self::Mug => Shape::Mug {
+                aspect: p[0],
+                wall: p[1],
+            },
+            Self::Car => Shape::Car {
+                cabin: p[0],
+                height: p[1],
+            },
         }
     }
 
@@ -120,7 +137,9 @@ impl Family {
             Self::Car => restarts.clamp(1, 2),
             Self::Mug => restarts.max(1),
         };
-        (0..n).map(|k| std::f64::consts::TAU * k as f64 / n as f64).collect()
+        (0..n)
+            .map(|k| std::f64::consts::TAU * k as f64 / n as f64)
+            .collect()
     }
 }
 
@@ -245,8 +264,18 @@ fn ser_sim<S: serde::Serializer>(s: &Similarity3<f64>, ser: S) -> Result<S::Ok, 
     use serde::ser::SerializeStruct;
     let r = s.rotation;
     let mut st = ser.serialize_struct("Similarity", 3)?;
-    st.serialize_field("rotation", &[[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]])?;
-    st.serialize_field("translation_m", &[s.translation.x, s.translation.y, s.translation.z])?;
+    st.serialize_field(
+        "rotation",
+        &[
+            [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
+            [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
+            [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
+        ],
+    )?;
+    st.serialize_field(
+        "translation_m",
+        &[s.translation.x, s.translation.y, s.translation.z],
+    )?;
     st.serialize_field("scale_m", &s.scale)?;
     st.end()
 }
@@ -255,14 +284,22 @@ impl FittedObject {
     /// The object as a renderer SDF.
     pub fn placed(&self) -> PlacedSdf {
         match &self.learned {
-            Some(l) => PlacedSdf { sdf: l.sdf.clone(), depth_from_object: self.depth_from_object },
-            None => PlacedSdf { sdf: self.shape.sdf(), depth_from_object: self.depth_from_object },
+            Some(l) => PlacedSdf {
+                sdf: l.sdf.clone(),
+                depth_from_object: self.depth_from_object,
+            },
+            None => PlacedSdf {
+                sdf: self.shape.sdf(),
+                depth_from_object: self.depth_from_object,
+            },
         }
     }
 
     /// Lowest object-frame y of the fitted surface.
     pub fn base_y(&self) -> f64 {
-        self.learned.as_ref().map_or_else(|| self.shape.base_y(), |l| l.base_y)
+        self.learned
+            .as_ref()
+            .map_or_else(|| self.shape.base_y(), |l| l.base_y)
     }
 
     /// The fitted surface as a mesh in the depth frame, `resolution` cells across the object
@@ -270,10 +307,15 @@ impl FittedObject {
     pub fn mesh(&self, resolution: usize) -> Result<TriMesh, ReconError> {
         let s = &self.depth_from_object;
         let mut m = match &self.learned {
-            Some(l) => irmirror_sdf::quality::extract_mesh(&l.net, &l.latent, resolution)?.main_components(irmirror_sdf::quality::MAIN_PART_FRACTION),
+            Some(l) => irmirror_sdf::quality::extract_mesh(&l.net, &l.latent, resolution)?
+                .main_components(irmirror_sdf::quality::MAIN_PART_FRACTION),
             None => family_mesh(&self.shape, resolution),
         };
-        m.map_vertices(|v| s.transform_point(&Vector3::from(v.map(f64::from))).map(|x| x as f32).into());
+        m.map_vertices(|v| {
+            s.transform_point(&Vector3::from(v.map(f64::from)))
+                .map(|x| x as f32)
+                .into()
+        });
         Ok(m)
     }
 }
@@ -282,7 +324,12 @@ impl FittedObject {
 fn family_mesh(shape: &Shape, resolution: usize) -> TriMesh {
     let sdf = shape.sdf();
     let r = sdf.bounding_radius() * 1.05;
-    irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), -Vector3::repeat(r), Vector3::repeat(r), resolution)
+    irmirror_geom::isosurface::isosurface(
+        |p| sdf.distance(p),
+        -Vector3::repeat(r),
+        Vector3::repeat(r),
+        resolution,
+    )
 }
 
 /// What one object's fit sees (depth frame, metres).
@@ -296,18 +343,33 @@ pub struct ObjectObservation {
 }
 
 /// Lifts a depth-pixel mask to the observation of one object.
-pub fn observe(depth_m: &Image<f32>, camera: &PinholeCamera, mask: &Image<bool>, cfg: &ObjectConfig) -> Result<ObjectObservation, ReconError> {
+pub fn observe(
+    depth_m: &Image<f32>,
+    camera: &PinholeCamera,
+    mask: &Image<bool>,
+    cfg: &ObjectConfig,
+) -> Result<ObjectObservation, ReconError> {
     let (w, h) = (depth_m.width, depth_m.height);
     let valid = |i: usize| depth_m.data[i].is_finite() && depth_m.data[i] > 0.0;
-    let idx: Vec<usize> = (0..(w * h) as usize).filter(|&i| mask.data[i] && valid(i)).collect();
+    let idx: Vec<usize> = (0..(w * h) as usize)
+        .filter(|&i| mask.data[i] && valid(i))
+        .collect();
     if idx.len() < 10 {
         return Err(ReconError::EmptyObject { pixels: idx.len() });
     }
     let stride = idx.len().div_ceil(cfg.max_points).max(1);
-    let point = |i: usize| camera.unproject((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5, f64::from(depth_m.data[i]));
+    let point = |i: usize| {
+        camera.unproject(
+            (i as u32 % w) as f64 + 0.5,
+            (i as u32 / w) as f64 + 0.5,
+            f64::from(depth_m.data[i]),
+        )
+    };
     let surface: Vec<Vector3<f64>> = idx.iter().step_by(stride).map(|&i| point(i)).collect();
     let zs: Vec<f64> = surface.iter().map(|p| p.z).collect();
-    let (zmin, zmax) = zs.iter().fold((f64::MAX, f64::MIN), |(a, b), &z| (a.min(z), b.max(z)));
+    let (zmin, zmax) = zs
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &z| (a.min(z), b.max(z)));
     let extent = (zmax - zmin).max(0.02);
     let mut free = Vec::new();
     // In front of the surface by 5 % of the object's depth extent, along the camera ray.
@@ -316,14 +378,25 @@ pub fn observe(depth_m: &Image<f32>, camera: &PinholeCamera, mask: &Image<bool>,
     }
     // The ring: the camera saw past (or missed) the object there.
     let ring = dilate(mask, cfg.ring_px);
-    let ring_idx: Vec<usize> = (0..(w * h) as usize).filter(|&i| ring.data[i] && !mask.data[i]).collect();
+    let ring_idx: Vec<usize> = (0..(w * h) as usize)
+        .filter(|&i| ring.data[i] && !mask.data[i])
+        .collect();
     let ring_stride = ring_idx.len().div_ceil(cfg.max_points / 2).max(1);
     for &i in ring_idx.iter().step_by(ring_stride) {
-        let far = if valid(i) { f64::from(depth_m.data[i]) - 0.02 * extent } else { zmax + extent };
+        let far = if valid(i) {
+            f64::from(depth_m.data[i]) - 0.02 * extent
+        } else {
+            zmax + extent
+        };
         for k in 0..RING_SAMPLES {
-            let z = zmin - 0.25 * extent + (zmax - zmin + 0.5 * extent) * k as f64 / (RING_SAMPLES - 1) as f64;
+            let z = zmin - 0.25 * extent
+                + (zmax - zmin + 0.5 * extent) * k as f64 / (RING_SAMPLES - 1) as f64;
             if z < far {
-                free.push(camera.unproject((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5, z));
+                free.push(camera.unproject(
+                    (i as u32 % w) as f64 + 0.5,
+                    (i as u32 / w) as f64 + 0.5,
+                    z,
+                ));
             }
         }
     }
@@ -345,7 +418,11 @@ struct State {
 
 impl State {
     fn sim(&self) -> Similarity3<f64> {
-        Similarity3 { rotation: self.rotation, translation: self.translation, scale: self.log_scale.exp() }
+        Similarity3 {
+            rotation: self.rotation,
+            translation: self.translation,
+            scale: self.log_scale.exp(),
+        }
     }
 }
 
@@ -370,30 +447,35 @@ impl Problem<'_> {
         let inv = 1.0 / self.s0;
         let hub = self.cfg.huber_m * inv;
         let mut loss = 0.0;
-        let mut acc = |p: &Vector3<f64>, weight: f64, surface: bool, grad: &mut Option<&mut Grad>| {
-            let q = r.tr_mul(&(p - t)) / s;
-            let dq = sdf.distance(&q);
-            let d = s * dq * inv;
-            // Value and derivative of the per-point term in d.
-            let (f, df) = if surface {
-                if d.abs() <= hub { (0.5 * d * d / hub, d / hub) } else { (d.abs() - 0.5 * hub, d.signum()) }
-            } else if d < 0.0 {
-                (-d, -1.0)
-            } else {
-                (0.0, 0.0)
+        let mut acc =
+            |p: &Vector3<f64>, weight: f64, surface: bool, grad: &mut Option<&mut Grad>| {
+                let q = r.tr_mul(&(p - t)) / s;
+                let dq = sdf.distance(&q);
+                let d = s * dq * inv;
+                // Value and derivative of the per-point term in d.
+                let (f, df) = if surface {
+                    if d.abs() <= hub {
+                        (0.5 * d * d / hub, d / hub)
+                    } else {
+                        (d.abs() - 0.5 * hub, d.signum())
+                    }
+                } else if d < 0.0 {
+                    (-d, -1.0)
+                } else {
+                    (0.0, 0.0)
+                };
+                loss += weight * f;
+                if let Some(g) = grad.as_deref_mut()
+                    && df != 0.0
+                {
+                    let gq = sdf.gradient(&q);
+                    let u = r * gq; // ∂(s·sdf)/∂p, depth frame
+                    let c = weight * df * inv;
+                    g.t -= u * c;
+                    g.log_s += c * s * (dq - gq.dot(&q));
+                    g.rot += u.cross(&(p - t)) * c;
+                }
             };
-            loss += weight * f;
-            if let Some(g) = grad.as_deref_mut()
-                && df != 0.0
-            {
-                let gq = sdf.gradient(&q);
-                let u = r * gq; // ∂(s·sdf)/∂p, depth frame
-                let c = weight * df * inv;
-                g.t -= u * c;
-                g.log_s += c * s * (dq - gq.dot(&q));
-                g.rot += u.cross(&(p - t)) * c;
-            }
-        };
         let ws = 1.0 / self.obs.surface.len() as f64;
         for p in &self.obs.surface {
             acc(p, ws, true, &mut grad);
@@ -414,7 +496,9 @@ impl Problem<'_> {
             let camera = r.tr_mul(&(-t)) / s; // the depth camera's centre, object frame
             for p in self.obs.surface.iter().step_by(stride) {
                 let (t_meas, ray) = (p.norm(), p.normalize());
-                let Some(t_obj) = render_depth(sdf, &camera, &r.tr_mul(&ray)) else { continue };
+                let Some(t_obj) = render_depth(sdf, &camera, &r.tr_mul(&ray)) else {
+                    continue;
+                };
                 let (t_hit, x) = (t_obj * s, ray * (t_obj * s));
                 let q = r.tr_mul(&(x - t)) / s;
                 let gq = sdf.gradient(&q);
@@ -426,7 +510,11 @@ impl Problem<'_> {
                     continue;
                 }
                 let e = (t_hit - t_meas) * inv;
-                let (f, df) = if e.abs() <= hub { (0.5 * e * e / hub, e / hub) } else { (e.abs() - 0.5 * hub, e.signum()) };
+                let (f, df) = if e.abs() <= hub {
+                    (0.5 * e * e / hub, e / hub)
+                } else {
+                    (e.abs() - 0.5 * hub, e.signum())
+                };
                 loss += wd * f;
                 if let Some(g) = grad.as_deref_mut() {
                     // dL/dθ = wd · f'(e) / s₀ · dt/dθ, dt/dθ = −(∂F/∂θ)/cos.
@@ -444,10 +532,17 @@ impl Problem<'_> {
         let wp = self.cfg.w_plane;
         loss += wp * e_up.norm_squared();
         let base = r * Vector3::new(0.0, base_y, 0.0) * s;
-        let e_base = if self.plane.found { (n.dot(&(t + base)) - self.plane.offset_m) * inv } else { 0.0 };
+        let e_base = if self.plane.found {
+            (n.dot(&(t + base)) - self.plane.offset_m) * inv
+        } else {
+            0.0
+        };
         loss += wp * e_base * e_base;
         // Size prior: ½ w ((ln s − μ)/σ)².
-        let size = self.family.size_prior().map(|(mean, sigma)| ((st.log_scale - mean) / sigma, sigma));
+        let size = self
+            .family
+            .size_prior()
+            .map(|(mean, sigma)| ((st.log_scale - mean) / sigma, sigma));
         if let Some((e, _)) = size {
             loss += 0.5 * self.cfg.w_size * e * e;
         }
@@ -476,9 +571,15 @@ impl Problem<'_> {
         let mut v = [0.0; 9];
         let (b1, b2) = (0.9f64, 0.999f64);
         let lrs = [
-            self.cfg.lr_rotation, self.cfg.lr_rotation, self.cfg.lr_rotation,
-            self.cfg.lr_translation * self.s0, self.cfg.lr_translation * self.s0, self.cfg.lr_translation * self.s0,
-            self.cfg.lr_scale, self.cfg.lr_shape, self.cfg.lr_shape,
+            self.cfg.lr_rotation,
+            self.cfg.lr_rotation,
+            self.cfg.lr_rotation,
+            self.cfg.lr_translation * self.s0,
+            self.cfg.lr_translation * self.s0,
+            self.cfg.lr_translation * self.s0,
+            self.cfg.lr_scale,
+            self.cfg.lr_shape,
+            self.cfg.lr_shape,
         ];
         let mut curve = Vec::with_capacity(self.cfg.iterations as usize);
         let iters = self.cfg.iterations.max(1);
@@ -487,21 +588,29 @@ impl Problem<'_> {
         // a worse basin (measured: from the true pose, to 18–36× its loss on 2 of 4 mugs).
         let mut best = (f64::INFINITY, st);
         for it in 0..iters {
-            let mut g = Grad { rot: Vector3::zeros(), t: Vector3::zeros(), log_s: 0.0 };
+            let mut g = Grad {
+                rot: Vector3::zeros(),
+                t: Vector3::zeros(),
+                log_s: 0.0,
+            };
             let loss = self.eval(&st, Some(&mut g));
             curve.push(loss);
             if loss < best.0 {
                 best = (loss, st);
             }
-            let mut flat = [g.rot.x, g.rot.y, g.rot.z, g.t.x, g.t.y, g.t.z, g.log_s, 0.0, 0.0];
+            let mut flat = [
+                g.rot.x, g.rot.y, g.rot.z, g.t.x, g.t.y, g.t.z, g.log_s, 0.0, 0.0,
+            ];
             for k in 0..n_u {
                 let h = 1e-3;
                 let (mut a, mut b) = (st, st);
                 a.u[k] = (a.u[k] + h).min(1.0);
                 b.u[k] = (b.u[k] - h).max(0.0);
-                flat[7 + k] = (self.eval(&a, None) - self.eval(&b, None)) / (a.u[k] - b.u[k]).max(1e-12);
+                flat[7 + k] =
+                    (self.eval(&a, None) - self.eval(&b, None)) / (a.u[k] - b.u[k]).max(1e-12);
             }
-            let schedule = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / iters as f64).cos());
+            let schedule =
+                0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / iters as f64).cos());
             let mut step = [0.0; 9];
             for k in 0..9 {
                 m[k] = b1 * m[k] + (1.0 - b1) * flat[k];
@@ -511,7 +620,8 @@ impl Problem<'_> {
                 step[k] = lrs[k] * schedule * mh / (vh.sqrt() + 1e-12);
             }
             // Left perturbation R ← exp(−step) R (the gradient was taken w.r.t. it).
-            st.rotation = axis_angle_to_matrix(&Vector3::new(-step[0], -step[1], -step[2])) * st.rotation;
+            st.rotation =
+                axis_angle_to_matrix(&Vector3::new(-step[0], -step[1], -step[2])) * st.rotation;
             st.translation -= Vector3::new(step[3], step[4], step[5]);
             st.log_scale -= step[6];
             for k in 0..n_u {
@@ -530,7 +640,11 @@ impl Problem<'_> {
 /// A rotation taking +Y to `n`, then turned by `yaw` about `n`.
 fn upright(n: &Vector3<f64>, yaw: f64) -> Matrix3<f64> {
     let y = n.normalize();
-    let helper = if y.x.abs() < 0.9 { Vector3::x() } else { Vector3::z() };
+    let helper = if y.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::z()
+    };
     let x = (helper - y * helper.dot(&y)).normalize();
     let z = x.cross(&y);
     let base = Matrix3::from_columns(&[x, y, z]);
@@ -565,9 +679,15 @@ fn render_depth(sdf: &dyn Sdf, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64
 }
 
 /// Fits one object of `family` to `obs`, standing on `plane`.
-pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &ObjectConfig) -> FittedObject {
+pub fn fit_family(
+    family: Family,
+    obs: &ObjectObservation,
+    plane: &Plane,
+    cfg: &ObjectConfig,
+) -> FittedObject {
     let n = plane.n();
-    let centroid = obs.surface.iter().fold(Vector3::zeros(), |a, p| a + p) / obs.surface.len() as f64;
+    let centroid =
+        obs.surface.iter().fold(Vector3::zeros(), |a, p| a + p) / obs.surface.len() as f64;
     // Size from the spread of the points across the plane.
     let horizontal = |p: &Vector3<f64>| {
         let d = p - centroid;
@@ -583,10 +703,20 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
         Some((mean, _)) => mean.exp(),
         None => r95 / 0.85,
     };
-    let problem = Problem { family, obs, plane, s0, cfg };
+    let problem = Problem {
+        family,
+        obs,
+        plane,
+        s0,
+        cfg,
+    };
     // Restarts: yaws × a low and a high first shape parameter (proportions trade against
     // scale, a local minimum the fit does not leave on its own).
-    let firsts: &[f64] = if family.dims() > 0 { &[0.25, 0.75] } else { &[0.5] };
+    let firsts: &[f64] = if family.dims() > 0 {
+        &[0.25, 0.75]
+    } else {
+        &[0.5]
+    };
     let inits: Vec<State> = family
         .yaws(cfg.restarts)
         .into_iter()
@@ -596,14 +726,20 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
             let u = [u0, 0.5];
             let shape = family.shape(&u);
             // Centre over the centroid, base on the plane.
-            let over = if plane.found { centroid - n * plane.height(&centroid) } else { centroid - n * s0 * shape.base_y().abs() };
+            let over = if plane.found {
+                centroid - n * plane.height(&centroid)
+            } else {
+                centroid - n * s0 * shape.base_y().abs()
+            };
             let mut translation = over - rotation * Vector3::new(0.0, shape.base_y(), 0.0) * s0;
             // The points are the near side of the object: push it away from the camera
             // (across the plane) until their centroid is on its surface, not inside it — a
             // car centred on its door starts with its near half in front of the camera's
             // view of the door (sphere tracing from the inside: each step moves by |d|).
             let sdf = shape.sdf();
-            let away = (centroid - n * n.dot(&centroid)).try_normalize(1e-9).unwrap_or_else(Vector3::z);
+            let away = (centroid - n * n.dot(&centroid))
+                .try_normalize(1e-9)
+                .unwrap_or_else(Vector3::z);
             for _ in 0..64 {
                 let d = s0 * sdf.distance(&(rotation.tr_mul(&(centroid - translation)) / s0));
                 if d >= -1e-3 * s0 {
@@ -611,19 +747,41 @@ pub fn fit_family(family: Family, obs: &ObjectObservation, plane: &Plane, cfg: &
                 }
                 translation += away * -d;
             }
-            State { rotation, translation, log_scale: s0.ln(), u }
+            State {
+                rotation,
+                translation,
+                log_scale: s0.ln(),
+                u,
+            }
         })
         .collect();
     let runs: Vec<(State, f64, Vec<f64>)> = inits.into_par_iter().map(|s| problem.run(s)).collect();
     for (k, (st, loss, _)) in runs.iter().enumerate() {
         let x = st.rotation * Vector3::x();
-        tracing::debug!("{family:?} restart {k}: loss {loss:.4e}, object +X {:.3} {:.3} {:.3}, scale {:.4} m", x.x, x.y, x.z, st.log_scale.exp());
+        tracing::debug!(
+            "{family:?} restart {k}: loss {loss:.4e}, object +X {:.3} {:.3} {:.3}, scale {:.4} m",
+            x.x,
+            x.y,
+            x.z,
+            st.log_scale.exp()
+        );
     }
-    let (st, loss, curve) = runs.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)).expect("at least one restart");
+    let (st, loss, curve) = runs
+        .into_iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("at least one restart");
     let shape = family.shape(&st.u);
     let sim = st.sim();
-    let placed = PlacedSdf { sdf: shape.sdf(), depth_from_object: sim };
-    let mean = obs.surface.iter().map(|p| placed.distance(p).abs()).sum::<f64>() / obs.surface.len() as f64;
+    let placed = PlacedSdf {
+        sdf: shape.sdf(),
+        depth_from_object: sim,
+    };
+    let mean = obs
+        .surface
+        .iter()
+        .map(|p| placed.distance(p).abs())
+        .sum::<f64>()
+        / obs.surface.len() as f64;
     FittedObject {
         category: shape.category().into(),
         shape,
@@ -648,7 +806,13 @@ const SUPPORT_DEPTH: f64 = 0.02;
 /// the prior's normalised frame (centre, half-diagonal 0.9), the mean latent the shape; then
 /// latent and placement are fitted together, with a grid just below the support plane under the
 /// footprint kept outside (when a plane was found). Spheres are returned unchanged.
-pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cfg: &ObjectConfig, seed: u64) -> Result<FittedObject, ReconError> {
+pub fn fit_learned(
+    fit: FittedObject,
+    obs: &ObjectObservation,
+    plane: &Plane,
+    cfg: &ObjectConfig,
+    seed: u64,
+) -> Result<FittedObject, ReconError> {
     let category = match fit.shape {
         Shape::Sphere => return Ok(fit),
         Shape::Bowl { .. } => Category::Bowl,
@@ -656,14 +820,32 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
         Shape::Car { .. } => Category::Car,
     };
     let net = SdfNet::builtin(category)?;
-    let (lo, hi) = family_mesh(&fit.shape, 48).bounds().ok_or_else(|| irmirror_sdf::SdfError::Invalid(format!("the fitted {} has no surface to place the learned prior on", category.name())))?;
-    let (lo, hi) = (Vector3::from(lo.map(f64::from)), Vector3::from(hi.map(f64::from)));
+    let (lo, hi) = family_mesh(&fit.shape, 48).bounds().ok_or_else(|| {
+        irmirror_sdf::SdfError::Invalid(format!(
+            "the fitted {} has no surface to place the learned prior on",
+            category.name()
+        ))
+    })?;
+    let (lo, hi) = (
+        Vector3::from(lo.map(f64::from)),
+        Vector3::from(hi.map(f64::from)),
+    );
     let s = &fit.depth_from_object;
     let k = (hi - lo).norm() / 2.0 / irmirror_sdf::families::NORMALISED_RADIUS;
-    let init = Similarity3 { rotation: s.rotation, translation: s.transform_point(&((lo + hi) / 2.0)), scale: s.scale * k };
+    let init = Similarity3 {
+        rotation: s.rotation,
+        translation: s.transform_point(&((lo + hi) / 2.0)),
+        scale: s.scale * k,
+    };
     let unit = s.scale;
-    let inside: Vec<Vector3<f64>> = obs.surface.iter().map(|p| p + p.normalize() * INSIDE_DEPTH * unit).collect();
-    let scale_prior = Family::of(category.name())?.size_prior().map(|_| (init.scale.ln(), 0.1));
+    let inside: Vec<Vector3<f64>> = obs
+        .surface
+        .iter()
+        .map(|p| p + p.normalize() * INSIDE_DEPTH * unit)
+        .collect();
+    let scale_prior = Family::of(category.name())?
+        .size_prior()
+        .map(|_| (init.scale.ln(), 0.1));
     // The underside is never seen: without the table the latent may push it through the plane.
     // A grid just below the plane under the (slightly widened) footprint is free space.
     let mut support = Vec::new();
@@ -671,19 +853,48 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
         let (n, g) = (plane.n(), SUPPORT_GRID);
         for i in 0..g {
             for j in 0..g {
-                let f = |k: usize, a: f64, b: f64| a + (b - a) * (-0.1 + 1.2 * (k as f64 + 0.5) / g as f64);
+                let f = |k: usize, a: f64, b: f64| {
+                    a + (b - a) * (-0.1 + 1.2 * (k as f64 + 0.5) / g as f64)
+                };
                 let p = s.transform_point(&Vector3::new(f(i, lo.x, hi.x), lo.y, f(j, lo.z, hi.z)));
                 support.push(p - n * (plane.height(&p) + SUPPORT_DEPTH * unit));
             }
         }
     }
-    let observation = PlacedObservation { surface: &obs.surface, free: &obs.free, inside: &inside, support: &support, up: Some(plane.n()), unit_m: unit, scale_prior };
-    let placed = fit_placed(&net, &observation, &init, &net.mean_latent(), &PlacedFitConfig { seed, ..cfg.learned })?;
+    let observation = PlacedObservation {
+        surface: &obs.surface,
+        free: &obs.free,
+        inside: &inside,
+        support: &support,
+        up: Some(plane.n()),
+        unit_m: unit,
+        scale_prior,
+    };
+    let placed = fit_placed(
+        &net,
+        &observation,
+        &init,
+        &net.mean_latent(),
+        &PlacedFitConfig {
+            seed,
+            ..cfg.learned
+        },
+    )?;
     let field = Arc::new(net.shape(&placed.latent)?);
-    let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?.main_components(irmirror_sdf::quality::MAIN_PART_FRACTION);
-    let base_y = mesh.vertices.iter().map(|v| f64::from(v[1])).fold(f64::INFINITY, f64::min);
+    let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?
+        .main_components(irmirror_sdf::quality::MAIN_PART_FRACTION);
+    let base_y = mesh
+        .vertices
+        .iter()
+        .map(|v| f64::from(v[1]))
+        .fold(f64::INFINITY, f64::min);
     let d = placed.depth_from_object;
-    let mean = obs.surface.iter().map(|p| (d.scale * field.value_grad(&d.inverse_transform_point(p)).0).abs()).sum::<f64>() / obs.surface.len() as f64;
+    let mean = obs
+        .surface
+        .iter()
+        .map(|p| (d.scale * field.value_grad(&d.inverse_transform_point(p)).0).abs())
+        .sum::<f64>()
+        / obs.surface.len() as f64;
     let mut curve = fit.loss_curve;
     curve.extend(&placed.curve);
     Ok(FittedObject {
@@ -691,7 +902,12 @@ pub fn fit_learned(fit: FittedObject, obs: &ObjectObservation, plane: &Plane, cf
         loss: placed.loss,
         mean_surface_error_m: mean,
         loss_curve: curve,
-        learned: Some(LearnedShape { latent: placed.latent, base_y, net, sdf: field }),
+        learned: Some(LearnedShape {
+            latent: placed.latent,
+            base_y,
+            net,
+            sdf: field,
+        }),
         ..fit
     })
 }
@@ -729,11 +945,19 @@ impl Objects {
 }
 
 /// Stage 1 on a loaded capture: support plane, masks (given or segmented), one fit per object.
-pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Config, seed: u64) -> Result<Objects, ReconError> {
+pub fn reconstruct_objects(
+    capture: &irmirror_capture::Capture,
+    cfg: &Stage1Config,
+    seed: u64,
+) -> Result<Objects, ReconError> {
     let depth = &capture.depth_m;
     let cam = &capture.depth_camera;
     let points = crate::segment::depth_points(depth, cam);
-    let families: Vec<Family> = capture.objects.iter().map(|o| Family::of(&o.category)).collect::<Result<_, _>>()?;
+    let families: Vec<Family> = capture
+        .objects
+        .iter()
+        .map(|o| Family::of(&o.category))
+        .collect::<Result<_, _>>()?;
     let mut given = vec![false; points.len()];
     for o in &capture.objects {
         if let Some(m) = &o.mask {
@@ -742,11 +966,16 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
             }
         }
     }
-    let candidates: Vec<Vector3<f64>> = points.iter().zip(&given).filter_map(|(p, &g)| if g { None } else { *p }).collect();
+    let candidates: Vec<Vector3<f64>> = points
+        .iter()
+        .zip(&given)
+        .filter_map(|(p, &g)| if g { None } else { *p })
+        .collect();
     let stride = candidates.len().div_ceil(20_000).max(1);
     let sub: Vec<Vector3<f64>> = candidates.into_iter().step_by(stride).collect();
     let mut rng = irmirror_geom::rng::seeded(seed, 11);
-    let plane = crate::plane::fit_plane(&sub, capture.up.as_ref(), &cfg.plane, &mut rng).unwrap_or_else(|| Plane::up_only(capture.up.unwrap_or(-Vector3::y())));
+    let plane = crate::plane::fit_plane(&sub, capture.up.as_ref(), &cfg.plane, &mut rng)
+        .unwrap_or_else(|| Plane::up_only(capture.up.unwrap_or(-Vector3::y())));
 
     // Masks: given, or the largest clusters above the plane for the objects without one.
     let missing = capture.objects.iter().filter(|o| o.mask.is_none()).count();
@@ -754,19 +983,39 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
         return Err(ReconError::NoSupportPlane);
     }
     // (mask, the cluster it was split from), largest first.
-    let mut clusters: Vec<(Image<bool>, usize)> =
-        if missing > 0 { crate::segment::segment(&points, depth.width, depth.height, &plane, &given, &cfg.segment).into_iter().enumerate().map(|(g, m)| (m, g)).collect() } else { vec![] };
+    let mut clusters: Vec<(Image<bool>, usize)> = if missing > 0 {
+        crate::segment::segment(
+            &points,
+            depth.width,
+            depth.height,
+            &plane,
+            &given,
+            &cfg.segment,
+        )
+        .into_iter()
+        .enumerate()
+        .map(|(g, m)| (m, g))
+        .collect()
+    } else {
+        vec![]
+    };
     // Touching objects join into one cluster: split the largest until there are enough (or
     // none can be split).
     while clusters.len() < missing
-        && let Some((a, b)) = clusters.first().and_then(|(c, _)| crate::segment::split(&points, c, &plane, &cfg.segment))
+        && let Some((a, b)) = clusters
+            .first()
+            .and_then(|(c, _)| crate::segment::split(&points, c, &plane, &cfg.segment))
     {
         let (_, g) = clusters.remove(0);
         clusters.extend([(a, g), (b, g)]);
-        clusters.sort_by_cached_key(|(m, _)| std::cmp::Reverse(m.data.iter().filter(|&&v| v).count()));
+        clusters
+            .sort_by_cached_key(|(m, _)| std::cmp::Reverse(m.data.iter().filter(|&&v| v).count()));
     }
     if clusters.len() < missing {
-        return Err(ReconError::Segmentation { wanted: missing, found: clusters.len() });
+        return Err(ReconError::Segmentation {
+            wanted: missing,
+            found: clusters.len(),
+        });
     }
     let mut clusters = clusters.into_iter();
     // Per capture object: its mask, and for segmented ones the cluster it came from.
@@ -776,7 +1025,9 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
         .map(|o| match &o.mask {
             Some(m) => (m.clone(), None),
             None => {
-                let (m, g) = clusters.next().expect("one cluster per object without a mask");
+                let (m, g) = clusters
+                    .next()
+                    .expect("one cluster per object without a mask");
                 (m, Some(g))
             }
         })
@@ -785,7 +1036,12 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
     // Segmented clusters come largest first, not in capture order: give each cluster the
     // family (among the mask-less objects' categories) that fits it best.
     let mut options: Vec<Family> = Vec::new();
-    for (_, f) in capture.objects.iter().zip(&families).filter(|(o, _)| o.mask.is_none()) {
+    for (_, f) in capture
+        .objects
+        .iter()
+        .zip(&families)
+        .filter(|(o, _)| o.mask.is_none())
+    {
         if !options.contains(f) {
             options.push(*f);
         }
@@ -795,7 +1051,11 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
     for (k, mask) in masks.iter().enumerate() {
         let obs = observe(depth, cam, mask, &cfg.fit)?;
         let fit = if segmented[k] {
-            options.iter().map(|f| fit_family(*f, &obs, &plane, &cfg.fit)).min_by(|a, b| a.loss.total_cmp(&b.loss)).expect("one option")
+            options
+                .iter()
+                .map(|f| fit_family(*f, &obs, &plane, &cfg.fit))
+                .min_by(|a, b| a.loss.total_cmp(&b.loss))
+                .expect("one option")
         } else {
             fit_family(families[k], &obs, &plane, &cfg.fit)
         };
@@ -813,17 +1073,29 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
             continue;
         }
         let placed: Vec<PlacedSdf> = members.iter().map(|&j| objects[j].placed()).collect();
-        let mut new: Vec<Image<bool>> = members.iter().map(|_| Image::filled(depth.width, depth.height, false)).collect();
+        let mut new: Vec<Image<bool>> = members
+            .iter()
+            .map(|_| Image::filled(depth.width, depth.height, false))
+            .collect();
         for i in 0..points.len() {
             if let Some(p) = points[i]
                 && members.iter().any(|&j| masks[j].data[i])
             {
-                let best = (0..members.len()).min_by(|&a, &b| placed[a].distance(&p).abs().total_cmp(&placed[b].distance(&p).abs())).expect("members");
+                let best = (0..members.len())
+                    .min_by(|&a, &b| {
+                        placed[a]
+                            .distance(&p)
+                            .abs()
+                            .total_cmp(&placed[b].distance(&p).abs())
+                    })
+                    .expect("members");
                 new[best].data[i] = true;
             }
         }
         for (&j, m) in members.iter().zip(new) {
-            let Ok(obs) = observe(depth, cam, &m, &cfg.fit) else { continue };
+            let Ok(obs) = observe(depth, cam, &m, &cfg.fit) else {
+                continue;
+            };
             objects[j] = fit_family(Family::of(&objects[j].category)?, &obs, &plane, &cfg.fit);
             observations[j] = obs;
             masks[j] = m;
@@ -831,11 +1103,20 @@ pub fn reconstruct_objects(capture: &irmirror_capture::Capture, cfg: &Stage1Conf
     }
     // The learned prior starts from the final family fits (after any split).
     if cfg.fit.prior == ObjectPrior::Learned {
-        objects = objects.into_iter().zip(&observations).enumerate().map(|(k, (o, obs))| fit_learned(o, obs, &plane, &cfg.fit, seed.wrapping_add(k as u64))).collect::<Result<_, _>>()?;
+        objects = objects
+            .into_iter()
+            .zip(&observations)
+            .enumerate()
+            .map(|(k, (o, obs))| fit_learned(o, obs, &plane, &cfg.fit, seed.wrapping_add(k as u64)))
+            .collect::<Result<_, _>>()?;
     }
-    Ok(Objects { plane, objects, masks, segmented })
+    Ok(Objects {
+        plane,
+        objects,
+        masks,
+        segmented,
+    })
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -856,33 +1137,61 @@ mod tests {
     /// for rays hitting it (centre, off-centre) and missing it.
     #[test]
     fn rendered_depth_is_the_ray_sphere_intersection() {
-        let st = State { rotation: axis_angle_to_matrix(&Vector3::new(0.3, -0.2, 0.5)), translation: Vector3::new(0.05, -0.02, 0.8), log_scale: 0.1f64.ln(), u: [0.0; 2] };
+        let st = State {
+            rotation: axis_angle_to_matrix(&Vector3::new(0.3, -0.2, 0.5)),
+            translation: Vector3::new(0.05, -0.02, 0.8),
+            log_scale: 0.1f64.ln(),
+            u: [0.0; 2],
+        };
         let sdf = Family::Sphere.shape(&[]).sdf();
         let s = st.log_scale.exp();
         let camera = st.rotation.tr_mul(&(-st.translation)) / s;
-        for (k, target) in [Vector3::new(0.05, -0.02, 0.8), Vector3::new(0.12, 0.03, 0.8), Vector3::new(-0.2, 0.0, 0.8)].iter().enumerate() {
+        for (k, target) in [
+            Vector3::new(0.05, -0.02, 0.8),
+            Vector3::new(0.12, 0.03, 0.8),
+            Vector3::new(-0.2, 0.0, 0.8),
+        ]
+        .iter()
+        .enumerate()
+        {
             let ray = target.normalize();
             let (c, r) = (st.translation, 0.1);
             let b = ray.dot(&c);
             let disc = b * b - (c.norm_squared() - r * r);
             let got = render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&ray));
             if disc < 0.0 {
-                assert!(got.is_none(), "ray {k} misses the sphere but rendered {got:?}");
+                assert!(
+                    got.is_none(),
+                    "ray {k} misses the sphere but rendered {got:?}"
+                );
             } else {
                 let t = got.unwrap_or_else(|| panic!("ray {k} hits the sphere")) * s;
-                assert!((t - (b - disc.sqrt())).abs() < 1e-7 && ((ray * t - c).norm() - r).abs() < 1e-7, "ray {k}: t {t}, closed form {}", b - disc.sqrt());
+                assert!(
+                    (t - (b - disc.sqrt())).abs() < 1e-7 && ((ray * t - c).norm() - r).abs() < 1e-7,
+                    "ray {k}: t {t}, closed form {}",
+                    b - disc.sqrt()
+                );
             }
         }
     }
 
     fn pose_gradients_for(family: Family) {
-        let truth = State { rotation: upright(&Vector3::new(0.1, -0.9, -0.3).normalize(), 0.7), translation: Vector3::new(0.02, 0.1, 0.7), log_scale: 0.07f64.ln(), u: [0.4, 0.6] };
-        let placed = PlacedSdf { sdf: family.shape(&truth.u).sdf(), depth_from_object: truth.sim() };
+        let truth = State {
+            rotation: upright(&Vector3::new(0.1, -0.9, -0.3).normalize(), 0.7),
+            translation: Vector3::new(0.02, 0.1, 0.7),
+            log_scale: 0.07f64.ln(),
+            u: [0.4, 0.6],
+        };
+        let placed = PlacedSdf {
+            sdf: family.shape(&truth.u).sdf(),
+            depth_from_object: truth.sim(),
+        };
         // Surface points by projecting a grid onto the surface; free points 1 cm out along −z.
         let mut surface = Vec::new();
         for i in 0..12 {
             for j in 0..12 {
-                let mut p = truth.translation + Vector3::new(-0.06 + 0.011 * i as f64, -0.06 + 0.011 * j as f64, -0.08);
+                let mut p = truth.translation
+                    + Vector3::new(-0.06 + 0.011 * i as f64, -0.06 + 0.011 * j as f64, -0.08);
                 for _ in 0..40 {
                     p -= placed.normal(&p) * placed.distance(&p);
                 }
@@ -891,29 +1200,83 @@ mod tests {
                 }
             }
         }
-        let free = surface.iter().map(|p| p - Vector3::new(0.0, 0.0, 0.01)).collect();
+        let free = surface
+            .iter()
+            .map(|p| p - Vector3::new(0.0, 0.0, 0.01))
+            .collect();
         let obs = ObjectObservation { surface, free };
-        let plane = Plane { normal: Vector3::new(0.1, -0.9, -0.3).normalize().into(), offset_m: -0.2, inlier_fraction: 1.0, found: true };
+        let plane = Plane {
+            normal: Vector3::new(0.1, -0.9, -0.3).normalize().into(),
+            offset_m: -0.2,
+            inlier_fraction: 1.0,
+            found: true,
+        };
         // The rendered-depth term at full weight, so its gradient is a large part of the check.
-        let cfg = ObjectConfig { w_depth: 1.0, ..ObjectConfig::default() };
-        let problem = Problem { family, obs: &obs, plane: &plane, s0: 0.07, cfg: &cfg };
+        let cfg = ObjectConfig {
+            w_depth: 1.0,
+            ..ObjectConfig::default()
+        };
+        let problem = Problem {
+            family,
+            obs: &obs,
+            plane: &plane,
+            s0: 0.07,
+            cfg: &cfg,
+        };
         // Evaluate away from the optimum so every term is active.
-        let st = State { rotation: axis_angle_to_matrix(&Vector3::new(0.05, -0.04, 0.03)) * truth.rotation, translation: truth.translation + Vector3::new(0.004, -0.003, 0.005), log_scale: truth.log_scale + 0.05, u: truth.u };
-        let mut g = Grad { rot: Vector3::zeros(), t: Vector3::zeros(), log_s: 0.0 };
+        let st = State {
+            rotation: axis_angle_to_matrix(&Vector3::new(0.05, -0.04, 0.03)) * truth.rotation,
+            translation: truth.translation + Vector3::new(0.004, -0.003, 0.005),
+            log_scale: truth.log_scale + 0.05,
+            u: truth.u,
+        };
+        let mut g = Grad {
+            rot: Vector3::zeros(),
+            t: Vector3::zeros(),
+            log_s: 0.0,
+        };
         let total = problem.eval(&st, Some(&mut g));
         // The rendered-depth term is active: most sampled rays hit and are not grazing.
-        let no_depth = ObjectConfig { w_depth: 0.0, ..cfg };
-        let without = Problem { cfg: &no_depth, ..problem };
+        let no_depth = ObjectConfig {
+            w_depth: 0.0,
+            ..cfg
+        };
+        let without = Problem {
+            cfg: &no_depth,
+            ..problem
+        };
         let (sdf, s) = (family.shape(&st.u).sdf(), st.log_scale.exp());
         let camera = st.rotation.tr_mul(&(-st.translation)) / s;
-        let hits = obs.surface.iter().filter(|p| render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&p.normalize())).is_some()).count();
-        let mut g0 = Grad { rot: Vector3::zeros(), t: Vector3::zeros(), log_s: 0.0 };
+        let hits = obs
+            .surface
+            .iter()
+            .filter(|p| {
+                render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&p.normalize())).is_some()
+            })
+            .count();
+        let mut g0 = Grad {
+            rot: Vector3::zeros(),
+            t: Vector3::zeros(),
+            log_s: 0.0,
+        };
         let base = without.eval(&st, Some(&mut g0));
         let share = ((g.t - g0.t).norm() + (g.rot - g0.rot).norm()) / (g.t.norm() + g.rot.norm());
-        eprintln!("{family:?}: {hits} of {} rays hit; L_depth {:.3e} of {total:.3e}; its share of the gradient {share:.2}", obs.surface.len(), total - base);
-        assert!(hits > obs.surface.len() / 2 && total - base > 0.005 * total && share > 0.1, "{hits} rays hit; L_depth {} of {total}, gradient share {share}", total - base);
+        eprintln!(
+            "{family:?}: {hits} of {} rays hit; L_depth {:.3e} of {total:.3e}; its share of the gradient {share:.2}",
+            obs.surface.len(),
+            total - base
+        );
+        assert!(
+            hits > obs.surface.len() / 2 && total - base > 0.005 * total && share > 0.1,
+            "{hits} rays hit; L_depth {} of {total}, gradient share {share}",
+            total - base
+        );
         let analytic = [g.rot.x, g.rot.y, g.rot.z, g.t.x, g.t.y, g.t.z, g.log_s];
-        assert!(obs.surface.len() > 50 && analytic.iter().all(|a| a.abs() > 1e-3), "{} points, gradient {analytic:?}", obs.surface.len());
+        assert!(
+            obs.surface.len() > 50 && analytic.iter().all(|a| a.abs() > 1e-3),
+            "{} points, gradient {analytic:?}",
+            obs.surface.len()
+        );
         let h = 1e-6;
         for (k, a) in analytic.iter().enumerate() {
             let shifted = |sign: f64| {
@@ -930,7 +1293,10 @@ mod tests {
                 problem.eval(&s, None)
             };
             let fd = (shifted(1.0) - shifted(-1.0)) / (2.0 * h);
-            assert!((fd - a).abs() <= 1e-4 * a.abs().max(1e-2), "parameter {k}: analytic {a}, central difference {fd}");
+            assert!(
+                (fd - a).abs() <= 1e-4 * a.abs().max(1e-2),
+                "parameter {k}: analytic {a}, central difference {fd}"
+            );
         }
     }
 }

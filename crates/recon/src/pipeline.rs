@@ -1,9 +1,9 @@
 //! The whole pipeline on one capture: stage 0 → stage 1 → reflected rays → stage 2.
 
+use crate::ReconError;
 use crate::human::{Floor, HumanConfig, HumanFit, HumanProblem, HumanState, fit_human};
 use crate::objects::{Objects, Stage1Config, reconstruct_objects};
 use crate::preprocess::{PreprocessConfig, Preprocessed, preprocess};
-use crate::ReconError;
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::{Capture, Image};
@@ -47,7 +47,11 @@ impl ReconConfig {
         if self.ablate.contains(&Ablation::SphereTracing) {
             t.method = SurfaceMethod::GradientProjection;
         }
-        let n = if self.ablate.contains(&Ablation::Smoothing) { Normals::Raw } else { Normals::Smoothed };
+        let n = if self.ablate.contains(&Ablation::Smoothing) {
+            Normals::Raw
+        } else {
+            Normals::Smoothed
+        };
         (t, n)
     }
     /// The stage-2 settings after ablations.
@@ -86,7 +90,12 @@ pub trait Progress: Sync {
 /// object (a bowl's own rim, a neighbouring mug) or the support plane within
 /// [`PLANE_BLOCK_M`] of its origin cannot show the person, whatever their pose, so it is left
 /// out of the fit (its pixel is neither evidence for nor against a body).
-pub fn unblocked(rays: &ReflectedRays<f64>, objects: &[irmirror_render::sdf::PlacedSdf], plane: &crate::plane::Plane, trace: &TraceParams) -> ReflectedRays<f64> {
+pub fn unblocked(
+    rays: &ReflectedRays<f64>,
+    objects: &[irmirror_render::sdf::PlacedSdf],
+    plane: &crate::plane::Plane,
+    trace: &TraceParams,
+) -> ReflectedRays<f64> {
     use rayon::prelude::*;
     let keep: Vec<bool> = (0..rays.len())
         .into_par_iter()
@@ -94,10 +103,17 @@ pub fn unblocked(rays: &ReflectedRays<f64>, objects: &[irmirror_render::sdf::Pla
             // Leave the surface by twice the tracer's coarse tolerance (which is relative to the
             // object's size) before testing, or the ray re-finds the point it leaves.
             let own = &objects[rays.object[i] as usize];
-            let tol = trace.coarse_tol_rel * own.sdf.bounding_radius() * own.depth_from_object.scale;
+            let tol =
+                trace.coarse_tol_rel * own.sdf.bounding_radius() * own.depth_from_object.scale;
             let o = rays.origin[i] + rays.normal[i] * (2.0 * tol + 2e-4);
-            let ray = irmirror_geom::Ray { origin: o, dir: rays.dir[i] };
-            if objects.iter().any(|obj| irmirror_render::sphere_trace::trace(obj, &ray, trace).is_some()) {
+            let ray = irmirror_geom::Ray {
+                origin: o,
+                dir: rays.dir[i],
+            };
+            if objects
+                .iter()
+                .any(|obj| irmirror_render::sphere_trace::trace(obj, &ray, trace).is_some())
+            {
                 return false;
             }
             if plane.found {
@@ -113,7 +129,11 @@ pub fn unblocked(rays: &ReflectedRays<f64>, objects: &[irmirror_render::sdf::Pla
             true
         })
         .collect();
-    let kept: Vec<usize> = keep.iter().enumerate().filter_map(|(i, k)| k.then_some(i)).collect();
+    let kept: Vec<usize> = keep
+        .iter()
+        .enumerate()
+        .filter_map(|(i, k)| k.then_some(i))
+        .collect();
     let mut out = ReflectedRays::default();
     rays.select_into(&kept, &mut out);
     out
@@ -127,17 +147,33 @@ pub const PLANE_BLOCK_M: f64 = 0.6;
 /// a support plane seen in the depth image; `None` without either (up alone gives no height).
 pub fn floor(objects: &Objects, cfg: &HumanConfig) -> Option<Floor> {
     let up = objects.plane.n().normalize();
-    let car = objects.objects.iter().find(|o| matches!(o.shape, irmirror_render::shapes::Shape::Car { .. }));
+    let car = objects
+        .objects
+        .iter()
+        .find(|o| matches!(o.shape, irmirror_render::shapes::Shape::Car { .. }));
     if let Some(car) = car {
         let s = &car.depth_from_object;
         let base = s.translation + s.rotation * Vector3::new(0.0, car.base_y(), 0.0) * s.scale;
-        return Some(Floor { up, offset_m: up.dot(&base) });
+        return Some(Floor {
+            up,
+            offset_m: up.dot(&base),
+        });
     }
-    objects.plane.found.then_some(Floor { up, offset_m: objects.plane.offset_m - cfg.table_height_m })
+    objects.plane.found.then_some(Floor {
+        up,
+        offset_m: objects.plane.offset_m - cfg.table_height_m,
+    })
 }
 
 /// Runs stages 0–2.
-pub fn reconstruct(capture: &Capture, model: &BodyModel, prior: &PosePrior, cfg: &ReconConfig, seed: u64, progress: &dyn Progress) -> Result<Reconstruction, ReconError> {
+pub fn reconstruct(
+    capture: &Capture,
+    model: &BodyModel,
+    prior: &PosePrior,
+    cfg: &ReconConfig,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<Reconstruction, ReconError> {
     progress.stage("thermal preprocessing", 0);
     let pre = preprocess(capture, &cfg.preprocess)?;
     progress.stage("object fit", 0);
@@ -149,31 +185,76 @@ pub fn reconstruct(capture: &Capture, model: &BodyModel, prior: &PosePrior, cfg:
 /// plus, for pixels of the reflection `mask` whose centre misses the fitted objects, a ray through
 /// their footprint where one hits (a reflection hugging a mug's silhouette is otherwise lost to
 /// a fit that is a fraction of a pixel small: 2 of 4 mug captures had no mask pixel left).
-pub fn reflected_rays(capture: &Capture, objects: &Objects, mask: &Image<bool>, cfg: &ReconConfig) -> ReflectedRays<f64> {
+pub fn reflected_rays(
+    capture: &Capture,
+    objects: &Objects,
+    mask: &Image<bool>,
+    cfg: &ReconConfig,
+) -> ReflectedRays<f64> {
     let (trace, normals) = cfg.rays_settings();
     let placed = objects.placed();
-    let mut all_rays = reflect_camera(&capture.thermal_camera, &capture.depth_from_thermal, &placed, &trace, normals);
+    let mut all_rays = reflect_camera(
+        &capture.thermal_camera,
+        &capture.depth_from_thermal,
+        &placed,
+        &trace,
+        normals,
+    );
     let mut covered = vec![false; mask.data.len()];
     for &p in &all_rays.pixel {
         covered[p as usize] = true;
     }
-    let missed: Vec<u32> = (0..mask.data.len() as u32).filter(|&p| mask.data[p as usize] && !covered[p as usize]).collect();
+    let missed: Vec<u32> = (0..mask.data.len() as u32)
+        .filter(|&p| mask.data[p as usize] && !covered[p as usize])
+        .collect();
     if !missed.is_empty() {
-        all_rays.extend(&reflect_footprint(&capture.thermal_camera, &capture.depth_from_thermal, &placed, &trace, &missed));
+        all_rays.extend(&reflect_footprint(
+            &capture.thermal_camera,
+            &capture.depth_from_thermal,
+            &placed,
+            &trace,
+            &missed,
+        ));
     }
     unblocked(&all_rays, &placed, &objects.plane, &trace)
 }
 
 /// Stage 2 (reflected rays, then the person) on given stage 0–1 results: the evaluation runs
 /// the ablations of one capture from the same objects.
-pub fn reconstruct_human(capture: &Capture, pre: Preprocessed, objects: Objects, model: &BodyModel, prior: &PosePrior, cfg: &ReconConfig, seed: u64, progress: &dyn Progress) -> Result<Reconstruction, ReconError> {
+pub fn reconstruct_human(
+    capture: &Capture,
+    pre: Preprocessed,
+    objects: Objects,
+    model: &BodyModel,
+    prior: &PosePrior,
+    cfg: &ReconConfig,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<Reconstruction, ReconError> {
     progress.stage("reflected rays", 0);
     let rays = reflected_rays(capture, &objects, &pre.mask, cfg);
     let placed = objects.placed();
-    let centre = placed.iter().fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation) / placed.len().max(1) as f64;
+    let centre = placed
+        .iter()
+        .fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation)
+        / placed.len().max(1) as f64;
     let hcfg = cfg.human_settings();
-    let problem = HumanProblem { model, prior, rays: &rays, mask: &pre.mask, up: objects.plane.n(), objects_centre: centre, floor: floor(&objects, &hcfg) };
+    let problem = HumanProblem {
+        model,
+        prior,
+        rays: &rays,
+        mask: &pre.mask,
+        up: objects.plane.n(),
+        objects_centre: centre,
+        floor: floor(&objects, &hcfg),
+    };
     progress.stage("human fit", hcfg.inits as u64);
     let (human, states) = fit_human(&problem, &hcfg, seed, &|_| progress.tick())?;
-    Ok(Reconstruction { pre, objects, rays, human, states })
+    Ok(Reconstruction {
+        pre,
+        objects,
+        rays,
+        human,
+        states,
+    })
 }

@@ -29,7 +29,12 @@ impl Plane {
     /// The stand-in when the depth image shows no support plane but the capture knows "up"
     /// (IMU): the direction only, no height.
     pub fn up_only(up: Vector3<f64>) -> Self {
-        Self { normal: up.normalize().into(), offset_m: 0.0, inlier_fraction: 0.0, found: false }
+        Self {
+            normal: up.normalize().into(),
+            offset_m: 0.0,
+            inlier_fraction: 0.0,
+            found: false,
+        }
     }
 }
 
@@ -65,14 +70,25 @@ pub struct PlaneConfig {
 
 impl Default for PlaneConfig {
     fn default() -> Self {
-        Self { iterations: 300, tolerance_m: 0.006, tolerance_rel: 0.004, max_tilt_deg: 75.0, max_tilt_imu_deg: 20.0 }
+        Self {
+            iterations: 300,
+            tolerance_m: 0.006,
+            tolerance_rel: 0.004,
+            max_tilt_deg: 75.0,
+            max_tilt_imu_deg: 20.0,
+        }
     }
 }
 
 /// Fits the dominant near-horizontal plane to `points` (depth frame): its normal within
 /// `max_tilt_imu_deg` of `imu_up` when given, else within `max_tilt_deg` of the camera's −Y.
 /// `None` if there are fewer than 3 points or no hypothesis passes the tilt test.
-pub fn fit_plane(points: &[Vector3<f64>], imu_up: Option<&Vector3<f64>>, cfg: &PlaneConfig, rng: &mut impl Rng) -> Option<Plane> {
+pub fn fit_plane(
+    points: &[Vector3<f64>],
+    imu_up: Option<&Vector3<f64>>,
+    cfg: &PlaneConfig,
+    rng: &mut impl Rng,
+) -> Option<Plane> {
     if points.len() < 3 {
         return None;
     }
@@ -85,21 +101,33 @@ pub fn fit_plane(points: &[Vector3<f64>], imu_up: Option<&Vector3<f64>>, cfg: &P
     let orient = |n: Vector3<f64>, c: f64| if c > 0.0 { (-n, -c) } else { (n, c) };
     let mut best: Option<(usize, Vector3<f64>, f64)> = None;
     for _ in 0..cfg.iterations {
-        let (a, b, c) = (points[rng.random_range(0..points.len())], points[rng.random_range(0..points.len())], points[rng.random_range(0..points.len())]);
-        let Some(n) = (b - a).cross(&(c - a)).try_normalize(1e-12) else { continue };
+        let (a, b, c) = (
+            points[rng.random_range(0..points.len())],
+            points[rng.random_range(0..points.len())],
+            points[rng.random_range(0..points.len())],
+        );
+        let Some(n) = (b - a).cross(&(c - a)).try_normalize(1e-12) else {
+            continue;
+        };
         // Orient towards the camera (origin): n · (0 − a) > 0 ⇔ offset n·a < 0.
         let (n, off) = orient(n, n.dot(&a));
         if n.dot(&up) < min_up {
             continue;
         }
-        let count = points.iter().filter(|p| (n.dot(p) - off).abs() < band(p)).count();
+        let count = points
+            .iter()
+            .filter(|p| (n.dot(p) - off).abs() < band(p))
+            .count();
         if best.as_ref().is_none_or(|b| count > b.0) {
             best = Some((count, n, off));
         }
     }
     let (_, n, off) = best?;
     // Least-squares refinement on the inliers (smallest-eigenvalue direction of the scatter).
-    let inliers: Vec<&Vector3<f64>> = points.iter().filter(|p| (n.dot(p) - off).abs() < band(p)).collect();
+    let inliers: Vec<&Vector3<f64>> = points
+        .iter()
+        .filter(|p| (n.dot(p) - off).abs() < band(p))
+        .collect();
     let centroid = inliers.iter().fold(Vector3::zeros(), |s, p| s + *p) / inliers.len() as f64;
     let mut scatter = Matrix3::zeros();
     for p in &inliers {
@@ -113,8 +141,16 @@ pub fn fit_plane(points: &[Vector3<f64>], imu_up: Option<&Vector3<f64>>, cfg: &P
         m = -m;
     }
     let (m, off) = orient(m, m.dot(&centroid));
-    let inliers = points.iter().filter(|p| (m.dot(p) - off).abs() < band(p)).count();
-    Some(Plane { normal: m.into(), offset_m: off, inlier_fraction: inliers as f64 / points.len() as f64, found: true })
+    let inliers = points
+        .iter()
+        .filter(|p| (m.dot(p) - off).abs() < band(p))
+        .count();
+    Some(Plane {
+        normal: m.into(),
+        offset_m: off,
+        inlier_fraction: inliers as f64 / points.len() as f64,
+        found: true,
+    })
 }
 
 #[cfg(test)]
@@ -127,20 +163,47 @@ mod tests {
         // Plane through (0, 0.3, 1) with normal towards the camera and up (−Y).
         let n = Vector3::new(0.1, -0.8, -0.5).normalize();
         let p0 = Vector3::new(0.0, 0.3, 1.0);
-        let (u, v) = (n.cross(&Vector3::x()).normalize(), n.cross(&n.cross(&Vector3::x())).normalize());
-        let mut pts: Vec<Vector3<f64>> = (0..600).map(|_| p0 + u * rng.random_range(-0.4..0.4) + v * rng.random_range(-0.4..0.4) + n * rng.random_range(-0.002..0.002)).collect();
-        pts.extend((0..300).map(|_| Vector3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(0.5..1.5))));
+        let (u, v) = (
+            n.cross(&Vector3::x()).normalize(),
+            n.cross(&n.cross(&Vector3::x())).normalize(),
+        );
+        let mut pts: Vec<Vector3<f64>> = (0..600)
+            .map(|_| {
+                p0 + u * rng.random_range(-0.4..0.4)
+                    + v * rng.random_range(-0.4..0.4)
+                    + n * rng.random_range(-0.002..0.002)
+            })
+            .collect();
+        pts.extend((0..300).map(|_| {
+            Vector3::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+                rng.random_range(0.5..1.5),
+            )
+        }));
         let plane = fit_plane(&pts, None, &PlaneConfig::default(), &mut rng).expect("plane");
         assert!(plane.n().dot(&n) > 0.999, "normal {:?}", plane.normal);
         assert!((plane.height(&p0)).abs() < 2e-3);
-        assert!(plane.inlier_fraction > 0.6 && plane.inlier_fraction < 0.75, "{}", plane.inlier_fraction);
+        assert!(
+            plane.inlier_fraction > 0.6 && plane.inlier_fraction < 0.75,
+            "{}",
+            plane.inlier_fraction
+        );
     }
 
     #[test]
     fn a_wall_is_not_a_floor() {
         let mut rng = irmirror_geom::rng::seeded(2, 0);
         // A fronto-parallel wall at z = 2 only.
-        let pts: Vec<Vector3<f64>> = (0..200).map(|_| Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 2.0)).collect();
+        let pts: Vec<Vector3<f64>> = (0..200)
+            .map(|_| {
+                Vector3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    2.0,
+                )
+            })
+            .collect();
         assert!(fit_plane(&pts, None, &PlaneConfig::default(), &mut rng).is_none());
     }
 
@@ -151,12 +214,26 @@ mod tests {
         let mut rng = irmirror_geom::rng::seeded(3, 0);
         let pitch = 50f64.to_radians();
         let up = Vector3::new(0.0, -pitch.cos(), -pitch.sin());
-        let wall: Vec<Vector3<f64>> = (0..200).map(|_| Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 2.0)).collect();
+        let wall: Vec<Vector3<f64>> = (0..200)
+            .map(|_| {
+                Vector3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    2.0,
+                )
+            })
+            .collect();
         assert!(fit_plane(&wall, Some(&up), &PlaneConfig::default(), &mut rng).is_none());
         // The floor 1.2 m below the camera: points p with up · p = −1.2.
         let (a, b) = (Vector3::x(), up.cross(&Vector3::x()).normalize());
-        let floor: Vec<Vector3<f64>> = (0..200).map(|_| -up * 1.2 + a * rng.random_range(-1.0..1.0) + b * rng.random_range(-1.0..1.0)).collect();
-        let plane = fit_plane(&floor, Some(&up), &PlaneConfig::default(), &mut rng).expect("the floor");
-        assert!(plane.n().dot(&up) > 0.9999 && (plane.offset_m + 1.2).abs() < 1e-6, "{plane:?}");
+        let floor: Vec<Vector3<f64>> = (0..200)
+            .map(|_| -up * 1.2 + a * rng.random_range(-1.0..1.0) + b * rng.random_range(-1.0..1.0))
+            .collect();
+        let plane =
+            fit_plane(&floor, Some(&up), &PlaneConfig::default(), &mut rng).expect("the floor");
+        assert!(
+            plane.n().dot(&up) > 0.9999 && (plane.offset_m + 1.2).abs() < 1e-6,
+            "{plane:?}"
+        );
     }
 }

@@ -39,7 +39,13 @@ pub struct PreprocessConfig {
 
 impl Default for PreprocessConfig {
     fn default() -> Self {
-        Self { threshold: Threshold::Otsu { noise_sigmas: 4.0 }, open_px: 0, close_px: 0, local_background_px: 15, min_region_px: 3 }
+        Self {
+            threshold: Threshold::Otsu { noise_sigmas: 4.0 },
+            open_px: 0,
+            close_px: 0,
+            local_background_px: 15,
+            min_region_px: 3,
+        }
     }
 }
 
@@ -87,12 +93,18 @@ fn local_median(img: &Image<f64>, window: u32) -> Image<f64> {
             median(&mut buf)
         })
         .collect();
-    Image { width: img.width, height: img.height, data }
+    Image {
+        width: img.width,
+        height: img.height,
+        data,
+    }
 }
 
 /// Otsu's threshold of `values` (256 bins between min and max).
 pub fn otsu(values: &[f64]) -> f64 {
-    let (lo, hi) = values.iter().fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     if values.is_empty() || hi <= lo {
         return hi;
     }
@@ -102,7 +114,11 @@ pub fn otsu(values: &[f64]) -> f64 {
         hist[(((v - lo) / (hi - lo)) * (bins - 1) as f64).round() as usize] += 1;
     }
     let total = values.len() as f64;
-    let sum_all: f64 = hist.iter().enumerate().map(|(i, &c)| i as f64 * c as f64).sum();
+    let sum_all: f64 = hist
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| i as f64 * c as f64)
+        .sum();
     let (mut w0, mut sum0, mut best, mut best_i) = (0.0, 0.0, -1.0, 0);
     for (i, &c) in hist.iter().enumerate() {
         w0 += c as f64;
@@ -127,7 +143,11 @@ pub fn otsu(values: &[f64]) -> f64 {
 pub fn object_pixels(capture: &Capture) -> Image<bool> {
     let (dc, tc) = (&capture.depth_camera, &capture.thermal_camera);
     let thermal_from_depth = capture.depth_from_thermal.inverse();
-    let masks: Vec<&Image<bool>> = capture.objects.iter().filter_map(|o| o.mask.as_ref()).collect();
+    let masks: Vec<&Image<bool>> = capture
+        .objects
+        .iter()
+        .filter_map(|o| o.mask.as_ref())
+        .collect();
     let mut out = Image::filled(tc.width, tc.height, false);
     for row in 0..dc.height {
         for col in 0..dc.width {
@@ -155,13 +175,31 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         let n = capture.thermal_background_k.len() as f64;
         let mut mean = Image::filled(t.width, t.height, 0.0);
         for b in &capture.thermal_background_k {
-            mean.data.iter_mut().zip(&b.data).for_each(|(m, v)| *m += v / n);
+            mean.data
+                .iter_mut()
+                .zip(&b.data)
+                .for_each(|(m, v)| *m += v / n);
         }
         mean
     };
-    let rise = Image { width: t.width, height: t.height, data: t.data.iter().zip(&background.data).map(|(a, b)| a - b).collect() };
+    let rise = Image {
+        width: t.width,
+        height: t.height,
+        data: t
+            .data
+            .iter()
+            .zip(&background.data)
+            .map(|(a, b)| a - b)
+            .collect(),
+    };
     let objects = object_pixels(capture);
-    let on: Vec<f64> = rise.data.iter().zip(&objects.data).filter(|(_, o)| **o).map(|(r, _)| *r).collect();
+    let on: Vec<f64> = rise
+        .data
+        .iter()
+        .zip(&objects.data)
+        .filter(|(_, o)| **o)
+        .map(|(r, _)| *r)
+        .collect();
     if on.is_empty() {
         return Err(ReconError::NoObjectPixels);
     }
@@ -174,15 +212,47 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         Threshold::DeltaK(k) => k,
         Threshold::Otsu { noise_sigmas } => otsu(&on).max(med + noise_sigmas * noise).max(1e-6),
     };
-    let raw = Image { width: t.width, height: t.height, data: rise.data.iter().zip(&objects.data).map(|(r, o)| *o && *r > threshold_k).collect() };
-    let mask = remove_small_components(&close(&open(&raw, cfg.open_px), cfg.close_px), cfg.min_region_px as usize);
+    let raw = Image {
+        width: t.width,
+        height: t.height,
+        data: rise
+            .data
+            .iter()
+            .zip(&objects.data)
+            .map(|(r, o)| *o && *r > threshold_k)
+            .collect(),
+    };
+    let mask = remove_small_components(
+        &close(&open(&raw, cfg.open_px), cfg.close_px),
+        cfg.min_region_px as usize,
+    );
     // Closing may reach past the object silhouette: keep the mask on objects.
-    let mask = Image { width: t.width, height: t.height, data: mask.data.iter().zip(&objects.data).map(|(m, o)| *m && *o).collect() };
+    let mask = Image {
+        width: t.width,
+        height: t.height,
+        data: mask
+            .data
+            .iter()
+            .zip(&objects.data)
+            .map(|(m, o)| *m && *o)
+            .collect(),
+    };
     if !mask.data.iter().any(|&m| m) {
-        return Err(ReconError::NoReflection { threshold_k, max_rise_k: max_rise });
+        return Err(ReconError::NoReflection {
+            threshold_k,
+            max_rise_k: max_rise,
+        });
     }
     let edges = edges(&mask);
-    Ok(Preprocessed { rise_k: rise, object_pixels: objects, raw_mask: raw, mask, edges, threshold_k, noise_k: noise })
+    Ok(Preprocessed {
+        rise_k: rise,
+        object_pixels: objects,
+        raw_mask: raw,
+        mask,
+        edges,
+        threshold_k,
+        noise_k: noise,
+    })
 }
 
 #[cfg(test)]

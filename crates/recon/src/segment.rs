@@ -29,7 +29,13 @@ pub struct SegmentConfig {
 
 impl Default for SegmentConfig {
     fn default() -> Self {
-        Self { min_height_m: 0.008, max_height_m: 2.5, join_m: 0.006, join_rel: 0.01, min_pixels: 40 }
+        Self {
+            min_height_m: 0.008,
+            max_height_m: 2.5,
+            join_m: 0.006,
+            join_rel: 0.01,
+            min_pixels: 40,
+        }
     }
 }
 
@@ -40,18 +46,36 @@ pub fn depth_points(depth_m: &Image<f32>, camera: &PinholeCamera) -> Vec<Option<
         .data
         .iter()
         .enumerate()
-        .map(|(i, &z)| (z.is_finite() && z > 0.0).then(|| camera.unproject((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5, f64::from(z))))
+        .map(|(i, &z)| {
+            (z.is_finite() && z > 0.0).then(|| {
+                camera.unproject(
+                    (i as u32 % w) as f64 + 0.5,
+                    (i as u32 / w) as f64 + 0.5,
+                    f64::from(z),
+                )
+            })
+        })
         .collect()
 }
 
 /// Clusters of points above `plane`, largest first, as depth-pixel masks. Pixels in `exclude`
 /// (objects with given masks) are left out.
-pub fn segment(points: &[Option<Vector3<f64>>], width: u32, height: u32, plane: &Plane, exclude: &[bool], cfg: &SegmentConfig) -> Vec<Image<bool>> {
+pub fn segment(
+    points: &[Option<Vector3<f64>>],
+    width: u32,
+    height: u32,
+    plane: &Plane,
+    exclude: &[bool],
+    cfg: &SegmentConfig,
+) -> Vec<Image<bool>> {
     let (w, h) = (width as usize, height as usize);
     let candidate: Vec<bool> = points
         .iter()
         .zip(exclude)
-        .map(|(p, &ex)| !ex && p.is_some_and(|p| (cfg.min_height_m..cfg.max_height_m).contains(&plane.height(&p))))
+        .map(|(p, &ex)| {
+            !ex && p
+                .is_some_and(|p| (cfg.min_height_m..cfg.max_height_m).contains(&plane.height(&p)))
+        })
         .collect();
     // Union–find over 8-neighbours.
     let mut parent: Vec<u32> = (0..(w * h) as u32).collect();
@@ -93,21 +117,36 @@ pub fn segment(points: &[Option<Vector3<f64>>], width: u32, height: u32, plane: 
     // across the plane are within `join_m` (objects stand side by side, not stacked). Buckets
     // of `join_m` on the plane; neighbouring buckets are compared point by point.
     let n = plane.n();
-    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::z() };
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::z()
+    };
     let e1 = (helper - n * n.dot(&helper)).normalize();
     let e2 = n.cross(&e1);
-    let cell = |p: &Vector3<f64>| ((e1.dot(p) / cfg.join_m).floor() as i64, (e2.dot(p) / cfg.join_m).floor() as i64);
+    let cell = |p: &Vector3<f64>| {
+        (
+            (e1.dot(p) / cfg.join_m).floor() as i64,
+            (e2.dot(p) / cfg.join_m).floor() as i64,
+        )
+    };
     let mut buckets: std::collections::HashMap<(i64, i64), Vec<u32>> = Default::default();
     for (i, p) in points.iter().enumerate() {
         if candidate[i] {
-            buckets.entry(cell(&p.expect("candidate has a point"))).or_default().push(i as u32);
+            buckets
+                .entry(cell(&p.expect("candidate has a point")))
+                .or_default()
+                .push(i as u32);
         }
     }
     let mut keys: Vec<(i64, i64)> = buckets.keys().copied().collect();
     keys.sort_unstable();
     for &(cx, cy) in &keys {
         for (dx, dy) in [(0i64, 0i64), (1, 0), (0, 1), (1, 1), (-1, 1)] {
-            let (Some(a), Some(b)) = (buckets.get(&(cx, cy)), buckets.get(&(cx + dx, cy + dy))) else { continue };
+            let (Some(a), Some(b)) = (buckets.get(&(cx, cy)), buckets.get(&(cx + dx, cy + dy)))
+            else {
+                continue;
+            };
             for &i in a {
                 let pi = points[i as usize].expect("candidate");
                 let (ui, vi) = (e1.dot(&pi), e2.dot(&pi));
@@ -131,7 +170,10 @@ pub fn segment(points: &[Option<Vector3<f64>>], width: u32, height: u32, plane: 
             members.entry(r).or_default().push(i);
         }
     }
-    let mut clusters: Vec<Vec<usize>> = members.into_values().filter(|m| m.len() >= cfg.min_pixels).collect();
+    let mut clusters: Vec<Vec<usize>> = members
+        .into_values()
+        .filter(|m| m.len() >= cfg.min_pixels)
+        .collect();
     clusters.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
     clusters
         .into_iter()
@@ -149,28 +191,52 @@ pub fn segment(points: &[Option<Vector3<f64>>], width: u32, height: u32, plane: 
 /// support plane (objects stand side by side on it; they are not stacked), started from the two
 /// extremes along the cluster's principal horizontal axis. Returns `None` for a cluster too small
 /// to hold two objects of `min_pixels` each.
-pub fn split(points: &[Option<Vector3<f64>>], cluster: &Image<bool>, plane: &Plane, cfg: &SegmentConfig) -> Option<(Image<bool>, Image<bool>)> {
+pub fn split(
+    points: &[Option<Vector3<f64>>],
+    cluster: &Image<bool>,
+    plane: &Plane,
+    cfg: &SegmentConfig,
+) -> Option<(Image<bool>, Image<bool>)> {
     let n = plane.n();
     let flat = |p: &Vector3<f64>| p - n * n.dot(p);
-    let idx: Vec<usize> = (0..cluster.data.len()).filter(|&i| cluster.data[i] && points[i].is_some()).collect();
+    let idx: Vec<usize> = (0..cluster.data.len())
+        .filter(|&i| cluster.data[i] && points[i].is_some())
+        .collect();
     if idx.len() < 2 * cfg.min_pixels {
         return None;
     }
-    let q: Vec<Vector3<f64>> = idx.iter().map(|&i| flat(&points[i].expect("filtered"))).collect();
+    let q: Vec<Vector3<f64>> = idx
+        .iter()
+        .map(|&i| flat(&points[i].expect("filtered")))
+        .collect();
     let mean = q.iter().sum::<Vector3<f64>>() / q.len() as f64;
-    let cov = q.iter().fold(nalgebra::Matrix3::zeros(), |c, p| c + (p - mean) * (p - mean).transpose());
+    let cov = q.iter().fold(nalgebra::Matrix3::zeros(), |c, p| {
+        c + (p - mean) * (p - mean).transpose()
+    });
     let eig = cov.symmetric_eigen();
     let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
     let along: Vec<f64> = q.iter().map(|p| axis.dot(&(p - mean))).collect();
-    let pick = |f: fn(f64, f64) -> bool| (0..q.len()).reduce(|a, b| if f(along[b], along[a]) { b } else { a }).expect("non-empty");
+    let pick = |f: fn(f64, f64) -> bool| {
+        (0..q.len())
+            .reduce(|a, b| if f(along[b], along[a]) { b } else { a })
+            .expect("non-empty")
+    };
     let mut centres = [q[pick(|a, b| a < b)], q[pick(|a, b| a > b)]];
     let mut label = vec![false; q.len()];
     for _ in 0..50 {
-        let next: Vec<bool> = q.iter().map(|p| (p - centres[1]).norm_squared() < (p - centres[0]).norm_squared()).collect();
+        let next: Vec<bool> = q
+            .iter()
+            .map(|p| (p - centres[1]).norm_squared() < (p - centres[0]).norm_squared())
+            .collect();
         let changed = next != label;
         label = next;
         for (k, c) in centres.iter_mut().enumerate() {
-            let members: Vec<&Vector3<f64>> = q.iter().zip(&label).filter(|(_, l)| **l == (k == 1)).map(|(p, _)| p).collect();
+            let members: Vec<&Vector3<f64>> = q
+                .iter()
+                .zip(&label)
+                .filter(|(_, l)| **l == (k == 1))
+                .map(|(p, _)| p)
+                .collect();
             if !members.is_empty() {
                 *c = members.iter().copied().sum::<Vector3<f64>>() / members.len() as f64;
             }
@@ -183,9 +249,16 @@ pub fn split(points: &[Option<Vector3<f64>>], cluster: &Image<bool>, plane: &Pla
     if count < cfg.min_pixels || q.len() - count < cfg.min_pixels {
         return None;
     }
-    let (mut a, mut b) = (Image::filled(cluster.width, cluster.height, false), Image::filled(cluster.width, cluster.height, false));
+    let (mut a, mut b) = (
+        Image::filled(cluster.width, cluster.height, false),
+        Image::filled(cluster.width, cluster.height, false),
+    );
     for (&i, &l) in idx.iter().zip(&label) {
-        if l { b.data[i] = true } else { a.data[i] = true }
+        if l {
+            b.data[i] = true
+        } else {
+            a.data[i] = true
+        }
     }
     Some((a, b))
 }
@@ -199,7 +272,12 @@ mod tests {
     #[test]
     fn split_separates_two_touching_discs() {
         let (w, h) = (80u32, 40u32);
-        let plane = Plane { normal: [0.0, -1.0, 0.0], offset_m: 0.0, inlier_fraction: 1.0, found: true };
+        let plane = Plane {
+            normal: [0.0, -1.0, 0.0],
+            offset_m: 0.0,
+            inlier_fraction: 1.0,
+            found: true,
+        };
         let mut points = vec![None; (w * h) as usize];
         let mut cluster = Image::filled(w, h, false);
         let mut truth = vec![0u8; (w * h) as usize];
@@ -219,15 +297,32 @@ mod tests {
         }
         let cfg = SegmentConfig::default();
         // The discs touch: segmentation alone sees one object.
-        assert_eq!(segment(&points, w, h, &plane, &vec![false; points.len()], &cfg).len(), 1);
+        assert_eq!(
+            segment(&points, w, h, &plane, &vec![false; points.len()], &cfg).len(),
+            1
+        );
         let (a, b) = split(&points, &cluster, &plane, &cfg).expect("two halves");
-        let label_of = |m: &Image<bool>| (0..truth.len()).filter(|&i| m.data[i]).map(|i| truth[i]).collect::<std::collections::BTreeSet<u8>>();
+        let label_of = |m: &Image<bool>| {
+            (0..truth.len())
+                .filter(|&i| m.data[i])
+                .map(|i| truth[i])
+                .collect::<std::collections::BTreeSet<u8>>()
+        };
         let (la, lb) = (label_of(&a), label_of(&b));
-        assert!(la.len() == 1 && lb.len() == 1 && la != lb, "halves mix the discs: {la:?} {lb:?}");
-        let sizes = (a.data.iter().filter(|&&v| v).count(), b.data.iter().filter(|&&v| v).count());
+        assert!(
+            la.len() == 1 && lb.len() == 1 && la != lb,
+            "halves mix the discs: {la:?} {lb:?}"
+        );
+        let sizes = (
+            a.data.iter().filter(|&&v| v).count(),
+            b.data.iter().filter(|&&v| v).count(),
+        );
         assert_eq!(sizes.0 + sizes.1, truth.iter().filter(|&&t| t > 0).count());
         // Too small to hold two objects: no split.
-        let tiny = SegmentConfig { min_pixels: sizes.0.max(sizes.1) + 1, ..cfg };
+        let tiny = SegmentConfig {
+            min_pixels: sizes.0.max(sizes.1) + 1,
+            ..cfg
+        };
         assert!(split(&points, &cluster, &plane, &tiny).is_none());
     }
 }

@@ -2,10 +2,10 @@
 
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
+use irmirror_render::reflect::ReflectedRays;
 use irmirror_sim::presets::{Preset, preset_scene};
 use irmirror_sim::scene::{SceneFile, ThermalPreset};
 use irmirror_sim::simulate;
-use irmirror_render::reflect::ReflectedRays;
 use nalgebra::Vector3;
 use std::sync::OnceLock;
 
@@ -20,12 +20,20 @@ fn prior() -> &'static PosePrior {
 }
 
 fn scene(seed: u64, is_car: bool) -> SceneFile {
-    let t = if std::env::var("BOSON").is_ok() { ThermalPreset::Boson } else { ThermalPreset::Lepton };
+    let t = if std::env::var("BOSON").is_ok() {
+        ThermalPreset::Boson
+    } else {
+        ThermalPreset::Lepton
+    };
     scene_with(seed, is_car, t)
 }
 
 fn scene_with(seed: u64, is_car: bool, t: ThermalPreset) -> SceneFile {
-    let p = if is_car { Preset::Car } else { Preset::Tabletop };
+    let p = if is_car {
+        Preset::Car
+    } else {
+        Preset::Tabletop
+    };
     preset_scene(model(), p, t, seed).unwrap()
 }
 
@@ -39,16 +47,41 @@ fn car_capture(seed: u64) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays
 
 /// The unoccluded reflected rays of the true objects.
 fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> ReflectedRays<f64> {
-    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc.objects.iter().zip(&sim.object_poses).map(|(o, p)| irmirror_render::sdf::PlacedSdf { sdf: o.shape.sdf(), depth_from_object: *p }).collect();
+    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc
+        .objects
+        .iter()
+        .zip(&sim.object_poses)
+        .map(|(o, p)| irmirror_render::sdf::PlacedSdf {
+            sdf: o.shape.sdf(),
+            depth_from_object: *p,
+        })
+        .collect();
     let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
-    let all = irmirror_render::reflect::reflect_camera(&sc.thermal_camera.intrinsics, &dft, &objs, &Default::default(), irmirror_render::reflect::Normals::Raw);
-    irmirror_recon::pipeline::unblocked(&all, &objs, &irmirror_recon::plane::Plane::camera_up(), &Default::default())
+    let all = irmirror_render::reflect::reflect_camera(
+        &sc.thermal_camera.intrinsics,
+        &dft,
+        &objs,
+        &Default::default(),
+        irmirror_render::reflect::Normals::Raw,
+    );
+    irmirror_recon::pipeline::unblocked(
+        &all,
+        &objs,
+        &irmirror_recon::plane::Plane::camera_up(),
+        &Default::default(),
+    )
 }
 
 /// The true root rotation (Anny → depth) and the body's up, depth frame.
-fn true_root(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> (nalgebra::Matrix3<f64>, Vector3<f64>) {
+fn true_root(
+    sc: &SceneFile,
+    sim: &irmirror_sim::Simulation,
+) -> (nalgebra::Matrix3<f64>, Vector3<f64>) {
     let r = sim.body.depth_from_anny.rotation;
-    (r * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0])), r * Vector3::z())
+    (
+        r * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0])),
+        r * Vector3::z(),
+    )
 }
 
 /// Stage 2 alone on a car capture (true objects and true mask, so stage 0–1 errors do not
@@ -60,26 +93,50 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
     let seed = 1;
     let (sc, sim, rays) = car_capture(seed);
     // The simulator's own body mesh through these rays gives the truth mask exactly.
-    let v: Vec<Vector3<f64>> = sim.body.mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
+    let v: Vec<Vector3<f64>> = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])))
+        .collect();
     let bvh = irmirror_render::bvh::Bvh::build(&v, &sim.body.mesh.triangles);
     let hard = irmirror_render::hard::hard_mask(&rays, &bvh, &v, &sim.body.mesh.triangles);
-    assert_eq!(hard, sim.reflection_mask.data, "rays past the objects vs the simulator's truth mask");
+    assert_eq!(
+        hard, sim.reflection_mask.data,
+        "rays past the objects vs the simulator's truth mask"
+    );
 
     let root = sim.body.joints[0];
     let rv = &sc.person.rotvec_rad;
     let (r0, up) = true_root(&sc, &sim);
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor: None };
+    let problem = HumanProblem {
+        model: model(),
+        prior: prior(),
+        rays: &rays,
+        mask: &sim.reflection_mask,
+        up,
+        objects_centre: sim.object_poses[0].translation,
+        floor: None,
+    };
     let start = HumanState {
         translation: root + Vector3::new(0.2, 0.0, 0.0),
-        rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(problem.up * 20f64.to_radians())) * r0,
+        rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(problem.up * 20f64.to_radians()))
+            * r0,
         latent: prior().encode(rv).unwrap(),
     };
     let cfg = HumanConfig::default();
     let (l0, iou0) = problem.full_loss(&start, &cfg).unwrap();
-    let (end, curve) = problem.run(&start, &cfg, &edge_distance(&sim.reflection_mask), 7).unwrap().expect("no divergence");
+    let (end, curve) = problem
+        .run(&start, &cfg, &edge_distance(&sim.reflection_mask), 7)
+        .unwrap()
+        .expect("no divergence");
     let (l1, iou1) = problem.full_loss(&end, &cfg).unwrap();
     let err = (end.translation - root).norm();
-    eprintln!("loss {l0:.3} → {l1:.3}, soft IoU {iou0:.3} → {iou1:.3}, root error 0.200 → {err:.3} m, {} steps", curve.len());
+    eprintln!(
+        "loss {l0:.3} → {l1:.3}, soft IoU {iou0:.3} → {iou1:.3}, root error 0.200 → {err:.3} m, {} steps",
+        curve.len()
+    );
     assert!(l1 < l0 - 0.05, "loss {l0} → {l1}");
     assert!(iou1 > iou0, "soft IoU {iou0} → {iou1}");
 }
@@ -88,9 +145,21 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
 #[test]
 fn a_mask_off_the_objects_is_a_clear_error() {
     use irmirror_recon::human::*;
-    let rays = irmirror_render::reflect::ReflectedRays::<f64> { width: 4, height: 4, ..Default::default() };
+    let rays = irmirror_render::reflect::ReflectedRays::<f64> {
+        width: 4,
+        height: 4,
+        ..Default::default()
+    };
     let mask = irmirror_capture::Image::filled(4, 4, true);
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &mask, up: nalgebra::Vector3::y(), objects_centre: nalgebra::Vector3::zeros(), floor: None };
+    let problem = HumanProblem {
+        model: model(),
+        prior: prior(),
+        rays: &rays,
+        mask: &mask,
+        up: nalgebra::Vector3::y(),
+        objects_centre: nalgebra::Vector3::zeros(),
+        floor: None,
+    };
     let e = fit_human(&problem, &HumanConfig::default(), 0, &|_| {}).unwrap_err();
     assert!(matches!(e, irmirror_recon::ReconError::NoMaskRays), "{e}");
 }
@@ -103,9 +172,32 @@ fn stage2_gradient_matches_finite_differences() {
     let (sc, sim, rays) = car_capture(1);
     let (r0, up) = true_root(&sc, &sim);
     // A floor 6 cm below the true one, so its term is active.
-    let lowest = sim.body.mesh.vertices.iter().map(|v| up.dot(&Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])))).fold(f64::INFINITY, f64::min);
-    let floor = Some(Floor { up, offset_m: lowest - 0.06 });
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor };
+    let lowest = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| {
+            up.dot(&Vector3::new(
+                f64::from(v[0]),
+                f64::from(v[1]),
+                f64::from(v[2]),
+            ))
+        })
+        .fold(f64::INFINITY, f64::min);
+    let floor = Some(Floor {
+        up,
+        offset_m: lowest - 0.06,
+    });
+    let problem = HumanProblem {
+        model: model(),
+        prior: prior(),
+        rays: &rays,
+        mask: &sim.reflection_mask,
+        up,
+        objects_centre: sim.object_poses[0].translation,
+        floor,
+    };
     let cfg = HumanConfig::default();
     let sigma = 4e-4;
     let target = problem.targets();
@@ -115,14 +207,36 @@ fn stage2_gradient_matches_finite_differences() {
     latent[0] += 0.3;
     let mut ws = problem.scratch().unwrap();
     let mut g = vec![0.0; 6 + latent.len()];
-    let (l0, _) = problem.loss_grad(&mut ws, &t, &omega, &r0, &latent, &rays, &target, sigma, &cfg, Some(&mut g)).unwrap();
-    assert!(l0 > 0.05 && l0 < 0.99, "loss {l0} is not in the informative range");
-    let mut f = |t: &Vector3<f64>, w: &Vector3<f64>, z: &[f64]| problem.loss_grad(&mut ws, t, w, &r0, z, &rays, &target, sigma, &cfg, None).unwrap().0;
+    let (l0, _) = problem
+        .loss_grad(
+            &mut ws,
+            &t,
+            &omega,
+            &r0,
+            &latent,
+            &rays,
+            &target,
+            sigma,
+            &cfg,
+            Some(&mut g),
+        )
+        .unwrap();
+    assert!(
+        l0 > 0.05 && l0 < 0.99,
+        "loss {l0} is not in the informative range"
+    );
+    let mut f = |t: &Vector3<f64>, w: &Vector3<f64>, z: &[f64]| {
+        problem
+            .loss_grad(&mut ws, t, w, &r0, z, &rays, &target, sigma, &cfg, None)
+            .unwrap()
+            .0
+    };
     let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
     let mut worst = 0.0f64;
     for k in 0..6 + 6 {
         let h = if k < 6 { 1e-5 } else { 1e-4 };
-        let (mut tp, mut tm, mut wp, mut wm, mut zp, mut zm) = (t, t, omega, omega, latent.clone(), latent.clone());
+        let (mut tp, mut tm, mut wp, mut wm, mut zp, mut zm) =
+            (t, t, omega, omega, latent.clone(), latent.clone());
         let idx = if k < 6 { k } else { 6 + (k - 6) * 5 };
         match idx {
             0..3 => {
@@ -140,19 +254,30 @@ fn stage2_gradient_matches_finite_differences() {
         }
         let fd = (f(&tp, &wp, &zp) - f(&tm, &wm, &zm)) / (2.0 * h);
         let diff = (fd - g[idx]).abs();
-        eprintln!("param {idx:2}: analytic {:+.6e}, central difference {fd:+.6e}", g[idx]);
+        eprintln!(
+            "param {idx:2}: analytic {:+.6e}, central difference {fd:+.6e}",
+            g[idx]
+        );
         worst = worst.max(diff / gmax);
     }
     assert!(gmax > 1e-3, "gradient vanishes: {gmax}");
-    assert!(worst < 2e-3, "worst |fd − analytic| / max |g| = {worst:.2e}");
+    assert!(
+        worst < 2e-3,
+        "worst |fd − analytic| / max |g| = {worst:.2e}"
+    );
 }
 
 /// A car scene whose person the fit can represent exactly: the mean-adult shape and a pose the
 /// prior decodes exactly (its own decoding of the scene's pose).
-fn representable_car_capture(seed: u64, t: ThermalPreset) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
+fn representable_car_capture(
+    seed: u64,
+    t: ThermalPreset,
+) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
     let mut sc = scene_with(seed, true, t);
     sc.person.phenotype = irmirror_body::Phenotype::default();
-    let decoded = prior().decode(&prior().encode(&sc.person.rotvec_rad).unwrap()).unwrap();
+    let decoded = prior()
+        .decode(&prior().encode(&sc.person.rotvec_rad).unwrap())
+        .unwrap();
     for (j, r) in decoded.iter().enumerate().skip(1) {
         sc.person.rotvec_rad[j] = irmirror_geom::rotation::matrix_to_axis_angle(r).into();
     }
@@ -162,15 +287,29 @@ fn representable_car_capture(seed: u64, t: ThermalPreset) -> (SceneFile, irmirro
 }
 
 /// The truth, then the truth moved 20 cm (three directions) and turned 20° about `up`.
-fn perturbed_starts(root: Vector3<f64>, r0: &nalgebra::Matrix3<f64>, up: &Vector3<f64>, z: &[f64]) -> Vec<irmirror_recon::human::HumanState> {
-    [Vector3::zeros(), Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.2), Vector3::new(-0.12, 0.12, 0.12)]
-        .iter()
-        .enumerate()
-        .map(|(k, dt)| {
-            let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
-            irmirror_recon::human::HumanState { translation: root + dt, rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0, latent: z.to_vec() }
-        })
-        .collect()
+fn perturbed_starts(
+    root: Vector3<f64>,
+    r0: &nalgebra::Matrix3<f64>,
+    up: &Vector3<f64>,
+    z: &[f64],
+) -> Vec<irmirror_recon::human::HumanState> {
+    [
+        Vector3::zeros(),
+        Vector3::new(0.2, 0.0, 0.0),
+        Vector3::new(0.0, 0.0, 0.2),
+        Vector3::new(-0.12, 0.12, 0.12),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(k, dt)| {
+        let turn = if k == 0 { 0.0 } else { 20f64.to_radians() };
+        irmirror_recon::human::HumanState {
+            translation: root + dt,
+            rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0,
+            latent: z.to_vec(),
+        }
+    })
+    .collect()
 }
 
 /// Issue 8's test: on a capture with a noiseless mask and a person the model can represent
@@ -183,13 +322,24 @@ fn stage2_returns_from_perturbed_starts() {
     let (sc, sim, rays) = representable_car_capture(1, ThermalPreset::Boson);
     let root = sim.body.joints[0];
     let (r0, up) = true_root(&sc, &sim);
-    let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor: None };
+    let problem = HumanProblem {
+        model: model(),
+        prior: prior(),
+        rays: &rays,
+        mask: &sim.reflection_mask,
+        up,
+        objects_centre: sim.object_poses[0].translation,
+        floor: None,
+    };
     let z = prior().encode(&sc.person.rotvec_rad).unwrap();
     let cfg = HumanConfig::default();
     let edge = edge_distance(&sim.reflection_mask);
     let mut errors = Vec::new();
     for start in perturbed_starts(root, &r0, &up, &z) {
-        let (end, _) = problem.run(&start, &cfg, &edge, 7).unwrap().expect("no divergence");
+        let (end, _) = problem
+            .run(&start, &cfg, &edge, 7)
+            .unwrap()
+            .expect("no divergence");
         errors.push((end.translation - root).norm());
     }
     eprintln!("root errors (truth, then three perturbed starts): {errors:.3?} m");
@@ -203,10 +353,16 @@ fn stage2_returns_from_perturbed_starts() {
 #[ignore]
 fn perturbed_starts_report() {
     use irmirror_recon::human::*;
-    let seeds: Vec<u64> = std::env::var("SEEDS").map(|s| s.split(',').map(|x| x.parse().unwrap()).collect()).unwrap_or(vec![1]);
+    let seeds: Vec<u64> = std::env::var("SEEDS")
+        .map(|s| s.split(',').map(|x| x.parse().unwrap()).collect())
+        .unwrap_or(vec![1]);
     let mut cfg = HumanConfig::default();
     if let Ok(a) = std::env::var("AGG") {
-        cfg.aggregation = if a == "product" { irmirror_render::Aggregation::Product } else { irmirror_render::Aggregation::Silhouette };
+        cfg.aggregation = if a == "product" {
+            irmirror_render::Aggregation::Product
+        } else {
+            irmirror_render::Aggregation::Silhouette
+        };
     }
     if let Ok(s) = std::env::var("SIGMA") {
         let v: Vec<f64> = s.split(',').map(|x| x.parse().unwrap()).collect();
@@ -225,12 +381,27 @@ fn perturbed_starts_report() {
         let (sc, sim, rays) = representable_car_capture(seed, ThermalPreset::Boson);
         let root = sim.body.joints[0];
         let (r0, up) = true_root(&sc, &sim);
-        let problem = HumanProblem { model: model(), prior: prior(), rays: &rays, mask: &sim.reflection_mask, up, objects_centre: sim.object_poses[0].translation, floor: None };
+        let problem = HumanProblem {
+            model: model(),
+            prior: prior(),
+            rays: &rays,
+            mask: &sim.reflection_mask,
+            up,
+            objects_centre: sim.object_poses[0].translation,
+            floor: None,
+        };
         let z = prior().encode(&sc.person.rotvec_rad).unwrap();
-        let truth = HumanState { translation: root, rotation: r0, latent: z.clone() };
+        let truth = HumanState {
+            translation: root,
+            rotation: r0,
+            latent: z.clone(),
+        };
         let (lt, it) = problem.full_loss(&truth, &cfg).unwrap();
         let mask_px = sim.reflection_mask.data.iter().filter(|&&b| b).count();
-        eprintln!("seed {seed}: person {:.2} m, {mask_px} mask px, truth loss {lt:.3} soft IoU {it:.3}", root.norm());
+        eprintln!(
+            "seed {seed}: person {:.2} m, {mask_px} mask px, truth loss {lt:.3} soft IoU {it:.3}",
+            root.norm()
+        );
         let edge = edge_distance(&sim.reflection_mask);
         for (k, start) in perturbed_starts(root, &r0, &up, &z).into_iter().enumerate() {
             let t0 = std::time::Instant::now();
@@ -238,7 +409,11 @@ fn perturbed_starts_report() {
             let (l1, i1) = problem.full_loss(&end, &cfg).unwrap();
             let d = end.translation - root;
             let along = d.dot(&(root - sim.object_poses[0].translation).normalize());
-            eprintln!("  start {k}: error {:.3} m (along mirror→person {along:+.3}), loss {l1:.3} IoU {i1:.3}, {:.1} s", d.norm(), t0.elapsed().as_secs_f64());
+            eprintln!(
+                "  start {k}: error {:.3} m (along mirror→person {along:+.3}), loss {l1:.3} IoU {i1:.3}, {:.1} s",
+                d.norm(),
+                t0.elapsed().as_secs_f64()
+            );
         }
     }
 }

@@ -70,20 +70,37 @@ pub struct BenchScene {
 impl BenchScene {
     /// Reads the scene JSON and the masks it names (paths relative to the JSON).
     pub fn load(path: &Path) -> Result<Self, RenderError> {
-        let fail = |r: String| RenderError::File { path: path.into(), reason: r };
+        let fail = |r: String| RenderError::File {
+            path: path.into(),
+            reason: r,
+        };
         let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
         let f: File = serde_json::from_str(&text).map_err(|e| fail(e.to_string()))?;
         if f.reflector.r#type != "sphere" {
-            return Err(fail(format!("reflector type `{}` is not supported (sphere only)", f.reflector.r#type)));
+            return Err(fail(format!(
+                "reflector type `{}` is not supported (sphere only)",
+                f.reflector.r#type
+            )));
         }
-        let camera = PinholeCamera { width: f.camera.width, height: f.camera.height, fx: f.camera.fx, fy: f.camera.fy, cx: f.camera.cx, cy: f.camera.cy };
+        let camera = PinholeCamera {
+            width: f.camera.width,
+            height: f.camera.height,
+            fx: f.camera.fx,
+            fy: f.camera.fy,
+            cx: f.camera.cx,
+            cy: f.camera.cy,
+        };
         camera.validate().map_err(|e| fail(e.to_string()))?;
         let centre = Vector3::from(f.reflector.center);
         let sphere = PlacedSdf {
             sdf: Arc::new(Sphere { radius: 1.0 }),
-            depth_from_object: Similarity3::new(Matrix3::identity(), centre, f.reflector.radius).map_err(|e| fail(e.to_string()))?,
+            depth_from_object: Similarity3::new(Matrix3::identity(), centre, f.reflector.radius)
+                .map_err(|e| fail(e.to_string()))?,
         };
-        let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+        let dir = path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from("."));
         let (h, w) = (camera.height as usize, camera.width as usize);
         let mask = |name: &str| -> Result<Vec<f64>, RenderError> {
             let (mh, mw, data) = crate::npy::read_2d(&dir.join(name))?;
@@ -100,12 +117,21 @@ impl BenchScene {
             camera,
             sphere,
             sphere_center_radius: (centre, f.reflector.radius),
-            occupancy: OccupancyParams { sigma_m2: f.occupancy.sigma_m2, epsilon: 1e-4, ..Default::default() },
+            occupancy: OccupancyParams {
+                sigma_m2: f.occupancy.sigma_m2,
+                epsilon: 1e-4,
+                ..Default::default()
+            },
             vertices: f.mesh.vertices.iter().map(|v| Vector3::from(*v)).collect(),
             triangles: f.mesh.faces,
             target: mask(&f.target.file)?,
             // "file.npy (comment…)": the file name is the first word.
-            reference_hard: mask(f.reference_hard_mask.split_whitespace().next().unwrap_or(""))?,
+            reference_hard: mask(
+                f.reference_hard_mask
+                    .split_whitespace()
+                    .next()
+                    .unwrap_or(""),
+            )?,
         })
     }
 }

@@ -35,9 +35,15 @@ impl<T: Real> Bvh<T> {
     pub fn build(vertices: &[Vector3<T>], triangles: &[[u32; 3]]) -> Self {
         let centroids: Vec<Vector3<T>> = triangles
             .iter()
-            .map(|t| (vertices[t[0] as usize] + vertices[t[1] as usize] + vertices[t[2] as usize]) / T::of(3.0))
+            .map(|t| {
+                (vertices[t[0] as usize] + vertices[t[1] as usize] + vertices[t[2] as usize])
+                    / T::of(3.0)
+            })
             .collect();
-        let mut bvh = Self { nodes: Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1), order: (0..triangles.len() as u32).collect() };
+        let mut bvh = Self {
+            nodes: Vec::with_capacity(2 * triangles.len() / LEAF_SIZE + 1),
+            order: (0..triangles.len() as u32).collect(),
+        };
         if !triangles.is_empty() {
             bvh.split(0, triangles.len(), &centroids);
             bvh.refit(vertices, triangles);
@@ -47,11 +53,20 @@ impl<T: Real> Bvh<T> {
 
     fn split(&mut self, start: usize, end: usize, centroids: &[Vector3<T>]) -> u32 {
         let id = self.nodes.len() as u32;
-        self.nodes.push(Node { lo: Vector3::zeros(), hi: Vector3::zeros(), first: start as u32, count: (end - start) as u32, right: 0 });
+        self.nodes.push(Node {
+            lo: Vector3::zeros(),
+            hi: Vector3::zeros(),
+            first: start as u32,
+            count: (end - start) as u32,
+            right: 0,
+        });
         if end - start <= LEAF_SIZE {
             return id;
         }
-        let (mut lo, mut hi) = (centroids[self.order[start] as usize], centroids[self.order[start] as usize]);
+        let (mut lo, mut hi) = (
+            centroids[self.order[start] as usize],
+            centroids[self.order[start] as usize],
+        );
         for &t in &self.order[start..end] {
             lo = lo.inf(&centroids[t as usize]);
             hi = hi.sup(&centroids[t as usize]);
@@ -59,7 +74,9 @@ impl<T: Real> Bvh<T> {
         let axis = (hi - lo).imax();
         let mid = (start + end) / 2;
         self.order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
-            centroids[a as usize][axis].partial_cmp(&centroids[b as usize][axis]).unwrap_or(std::cmp::Ordering::Equal)
+            centroids[a as usize][axis]
+                .partial_cmp(&centroids[b as usize][axis])
+                .unwrap_or(std::cmp::Ordering::Equal)
         });
         let left = self.split(start, mid, centroids);
         let right = self.split(mid, end, centroids);
@@ -95,7 +112,13 @@ impl<T: Real> Bvh<T> {
 
     /// Calls `visit(triangle)` for every triangle whose box, inflated by `radius`, meets the
     /// half-line `o + s r`, `s ≥ 0`. `inv_r` is `1 / r` per component. No allocation.
-    pub fn for_each_near_ray(&self, o: &Vector3<T>, inv_r: &Vector3<T>, radius: T, mut visit: impl FnMut(u32)) {
+    pub fn for_each_near_ray(
+        &self,
+        o: &Vector3<T>,
+        inv_r: &Vector3<T>,
+        radius: T,
+        mut visit: impl FnMut(u32),
+    ) {
         self.for_each_near_ray_shrinking(o, inv_r, radius, |t| {
             visit(t);
             radius
@@ -104,7 +127,13 @@ impl<T: Real> Bvh<T> {
 
     /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
     /// larger): a nearest-element search prunes the boxes beyond its best distance so far.
-    pub fn for_each_near_ray_shrinking(&self, o: &Vector3<T>, inv_r: &Vector3<T>, mut radius: T, mut visit: impl FnMut(u32) -> T) {
+    pub fn for_each_near_ray_shrinking(
+        &self,
+        o: &Vector3<T>,
+        inv_r: &Vector3<T>,
+        mut radius: T,
+        mut visit: impl FnMut(u32) -> T,
+    ) {
         if self.nodes.is_empty() {
             return;
         }
@@ -113,7 +142,12 @@ impl<T: Real> Bvh<T> {
         while top > 0 {
             top -= 1;
             let n = &self.nodes[stack[top] as usize];
-            if !slab_hit(&(n.lo.add_scalar(-radius)), &(n.hi.add_scalar(radius)), o, inv_r) {
+            if !slab_hit(
+                &(n.lo.add_scalar(-radius)),
+                &(n.hi.add_scalar(radius)),
+                o,
+                inv_r,
+            ) {
                 continue;
             }
             if n.count > 0 {

@@ -44,7 +44,11 @@ impl<T: Real> PairDistance<T> {
         PairGrad {
             origin: two_diff,
             dir: two_diff * self.s,
-            vertices: [-two_diff * self.bary[0], -two_diff * self.bary[1], -two_diff * self.bary[2]],
+            vertices: [
+                -two_diff * self.bary[0],
+                -two_diff * self.bary[1],
+                -two_diff * self.bary[2],
+            ],
         }
     }
 }
@@ -77,7 +81,12 @@ pub fn ray_triangle<T: Real>(o: &Vector3<T>, r: &Vector3<T>, v: &[Vector3<T>; 3]
 /// Closest points between segment `a + u (b − a)`, `u ∈ [0, 1]`, and half-line `o + s r`,
 /// `s ≥ 0` (Ericson, *Real-Time Collision Detection* §5.1.9, one side unbounded).
 /// Returns `(d², u, s)`.
-pub fn segment_ray<T: Real>(a: &Vector3<T>, b: &Vector3<T>, o: &Vector3<T>, r: &Vector3<T>) -> (T, T, T) {
+pub fn segment_ray<T: Real>(
+    a: &Vector3<T>,
+    b: &Vector3<T>,
+    o: &Vector3<T>,
+    r: &Vector3<T>,
+) -> (T, T, T) {
     let (zero, one) = (T::zero(), T::one());
     let d1 = b - a; // segment
     let w = a - o;
@@ -92,7 +101,11 @@ pub fn segment_ray<T: Real>(a: &Vector3<T>, b: &Vector3<T>, o: &Vector3<T>, r: &
         let c = d1.dot(&w);
         let bb = d1.dot(r);
         let denom = aa * ee - bb * bb;
-        let mut uu = if denom > T::eps() * aa * ee { ((bb * f - c * ee) / denom).clamp(zero, one) } else { zero };
+        let mut uu = if denom > T::eps() * aa * ee {
+            ((bb * f - c * ee) / denom).clamp(zero, one)
+        } else {
+            zero
+        };
         let mut ss = (bb * uu + f) / ee;
         if ss < zero {
             ss = zero;
@@ -163,12 +176,19 @@ pub fn point_triangle<T: Real>(p: &Vector3<T>, v: &[Vector3<T>; 3]) -> (T, [T; 3
 }
 
 fn closest_on_edges_to_point<T: Real>(p: &Vector3<T>, v: &[Vector3<T>; 3]) -> (T, [T; 3]) {
-    let mut best = (T::max_value().unwrap_or(T::one()), [T::one(), T::zero(), T::zero()]);
+    let mut best = (
+        T::max_value().unwrap_or(T::one()),
+        [T::one(), T::zero(), T::zero()],
+    );
     for k in 0..3 {
         let (a, b) = (v[k], v[(k + 1) % 3]);
         let e = b - a;
         let len2 = e.norm_squared();
-        let u = if len2 > T::zero() { ((p - a).dot(&e) / len2).clamp(T::zero(), T::one()) } else { T::zero() };
+        let u = if len2 > T::zero() {
+            ((p - a).dot(&e) / len2).clamp(T::zero(), T::one())
+        } else {
+            T::zero()
+        };
         let d2 = (a + e * u - p).norm_squared();
         if d2 < best.0 {
             let mut bary = [T::zero(); 3];
@@ -182,10 +202,19 @@ fn closest_on_edges_to_point<T: Real>(p: &Vector3<T>, v: &[Vector3<T>; 3]) -> (T
 
 /// The SoftRas distance between half-line `o + s r` and triangle `v`: to the triangle when not
 /// pierced, to its boundary when pierced (so that occupancy rises towards 1 inside).
-pub fn ray_triangle_distance<T: Real>(o: &Vector3<T>, r: &Vector3<T>, v: &[Vector3<T>; 3]) -> PairDistance<T> {
+pub fn ray_triangle_distance<T: Real>(
+    o: &Vector3<T>,
+    r: &Vector3<T>,
+    v: &[Vector3<T>; 3],
+) -> PairDistance<T> {
     let pierced = ray_triangle(o, r, v).is_some();
     // Edges (both cases).
-    let mut best = PairDistance { d2: T::max_value().unwrap_or(T::one()), s: T::zero(), bary: [T::zero(); 3], pierced };
+    let mut best = PairDistance {
+        d2: T::max_value().unwrap_or(T::one()),
+        s: T::zero(),
+        bary: [T::zero(); 3],
+        pierced,
+    };
     for k in 0..3 {
         let (a, b) = (v[k], v[(k + 1) % 3]);
         let (d2, u, s) = segment_ray(&a, &b, o, r);
@@ -193,14 +222,24 @@ pub fn ray_triangle_distance<T: Real>(o: &Vector3<T>, r: &Vector3<T>, v: &[Vecto
             let mut bary = [T::zero(); 3];
             bary[k] = T::one() - u;
             bary[(k + 1) % 3] += u;
-            best = PairDistance { d2, s, bary, pierced };
+            best = PairDistance {
+                d2,
+                s,
+                bary,
+                pierced,
+            };
         }
     }
     if !pierced {
         // The ray's origin may be closest to the triangle's interior.
         let (d2, bary) = point_triangle(o, v);
         if d2 < best.d2 {
-            best = PairDistance { d2, s: T::zero(), bary, pierced };
+            best = PairDistance {
+                d2,
+                s: T::zero(),
+                bary,
+                pierced,
+            };
         }
     }
     best
@@ -216,16 +255,27 @@ mod tests {
     }
 
     /// Brute force: minimise over a fine grid of ray parameters and barycentrics.
-    fn brute(o: &Vector3<f64>, r: &Vector3<f64>, tri: &[Vector3<f64>; 3], boundary_only: bool) -> f64 {
+    fn brute(
+        o: &Vector3<f64>,
+        r: &Vector3<f64>,
+        tri: &[Vector3<f64>; 3],
+        boundary_only: bool,
+    ) -> f64 {
         let n = 200;
         let mut best = f64::MAX;
         let pts: Vec<Vector3<f64>> = if boundary_only {
-            (0..3).flat_map(|k| (0..=n).map(move |i| (k, i as f64 / n as f64))).map(|(k, u)| tri[k] * (1.0 - u) + tri[(k + 1) % 3] * u).collect()
+            (0..3)
+                .flat_map(|k| (0..=n).map(move |i| (k, i as f64 / n as f64)))
+                .map(|(k, u)| tri[k] * (1.0 - u) + tri[(k + 1) % 3] * u)
+                .collect()
         } else {
-            (0..=n).flat_map(|i| (0..=n - i).map(move |j| (i, j))).map(|(i, j)| {
-                let (a, b) = (i as f64 / n as f64, j as f64 / n as f64);
-                tri[0] * (1.0 - a - b) + tri[1] * a + tri[2] * b
-            }).collect()
+            (0..=n)
+                .flat_map(|i| (0..=n - i).map(move |j| (i, j)))
+                .map(|(i, j)| {
+                    let (a, b) = (i as f64 / n as f64, j as f64 / n as f64);
+                    tri[0] * (1.0 - a - b) + tri[1] * a + tri[2] * b
+                })
+                .collect()
         };
         for q in pts {
             // Exact closest point on the half-line to q.
@@ -240,10 +290,25 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         let mut pierced_seen = 0;
         for _ in 0..200 {
-            let tri = [0, 1, 2].map(|_| v(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-0.3..0.3)));
-            let o = v(rng.random_range(-1.5..1.5), rng.random_range(-1.5..1.5), rng.random_range(-2.0..2.0));
+            let tri = [0, 1, 2].map(|_| {
+                v(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-0.3..0.3),
+                )
+            });
+            let o = v(
+                rng.random_range(-1.5..1.5),
+                rng.random_range(-1.5..1.5),
+                rng.random_range(-2.0..2.0),
+            );
             // Aim near the triangle so that about half the rays pierce it.
-            let aim = (tri[0] + tri[1] + tri[2]) / 3.0 + v(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), 0.0);
+            let aim = (tri[0] + tri[1] + tri[2]) / 3.0
+                + v(
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                    0.0,
+                );
             let r = (aim - o).normalize();
             let pd = ray_triangle_distance(&o, &r, &tri);
             pierced_seen += usize::from(pd.pierced);
@@ -251,9 +316,17 @@ mod tests {
             // The grid over-estimates the minimum by O((edge/n)²); our value must not exceed it
             // and must be close.
             assert!(pd.d2 <= b + 1e-12, "{} > brute {}", pd.d2, b);
-            assert!(b - pd.d2 < 2e-3 * (1.0 + b.sqrt()), "{} vs brute {}", pd.d2, b);
+            assert!(
+                b - pd.d2 < 2e-3 * (1.0 + b.sqrt()),
+                "{} vs brute {}",
+                pd.d2,
+                b
+            );
         }
-        assert!(pierced_seen > 40, "the sample should contain pierced triangles");
+        assert!(
+            pierced_seen > 40,
+            "the sample should contain pierced triangles"
+        );
     }
 
     #[test]
@@ -261,7 +334,11 @@ mod tests {
         let tri = [v(0.0, 0.0, 1.0), v(1.0, 0.0, 1.0), v(0.0, 1.0, 1.0)];
         let r = v(0.0, 0.0, 1.0);
         assert!((ray_triangle(&v(0.2, 0.2, 0.0), &r, &tri).unwrap() - 1.0).abs() < 1e-15);
-        assert_eq!(ray_triangle(&v(0.2, 0.2, 2.0), &r, &tri), None, "behind the origin");
+        assert_eq!(
+            ray_triangle(&v(0.2, 0.2, 2.0), &r, &tri),
+            None,
+            "behind the origin"
+        );
         assert_eq!(ray_triangle(&v(0.8, 0.8, 0.0), &r, &tri), None);
         // Pierced at (0.2, 0.2): the nearest edges are x = 0 and y = 0, both 0.2 away.
         let pd = ray_triangle_distance(&v(0.2, 0.2, 0.0), &r, &tri);
@@ -275,20 +352,34 @@ mod tests {
         let pd = ray_triangle_distance(&o, &r, &tri);
         let g = pd.grad(&o, &r, &tri);
         let h = 1e-7;
-        let f = |o: Vector3<f64>, r: Vector3<f64>, t: [Vector3<f64>; 3]| ray_triangle_distance(&o, &r, &t).d2;
+        let f = |o: Vector3<f64>, r: Vector3<f64>, t: [Vector3<f64>; 3]| {
+            ray_triangle_distance(&o, &r, &t).d2
+        };
         for k in 0..3 {
             let mut e = Vector3::zeros();
             e[k] = h;
             let fd_o = (f(o + e, r, tri) - f(o - e, r, tri)) / (2.0 * h);
             let fd_r = (f(o, r + e, tri) - f(o, r - e, tri)) / (2.0 * h);
-            assert!((fd_o - g.origin[k]).abs() < 1e-6, "origin {k}: {fd_o} vs {}", g.origin[k]);
-            assert!((fd_r - g.dir[k]).abs() < 1e-6, "dir {k}: {fd_r} vs {}", g.dir[k]);
+            assert!(
+                (fd_o - g.origin[k]).abs() < 1e-6,
+                "origin {k}: {fd_o} vs {}",
+                g.origin[k]
+            );
+            assert!(
+                (fd_r - g.dir[k]).abs() < 1e-6,
+                "dir {k}: {fd_r} vs {}",
+                g.dir[k]
+            );
             for j in 0..3 {
                 let (mut tp, mut tm) = (tri, tri);
                 tp[j] += e;
                 tm[j] -= e;
                 let fd = (f(o, r, tp) - f(o, r, tm)) / (2.0 * h);
-                assert!((fd - g.vertices[j][k]).abs() < 1e-6, "vertex {j}[{k}]: {fd} vs {}", g.vertices[j][k]);
+                assert!(
+                    (fd - g.vertices[j][k]).abs() < 1e-6,
+                    "vertex {j}[{k}]: {fd} vs {}",
+                    g.vertices[j][k]
+                );
             }
         }
     }
@@ -305,18 +396,30 @@ mod tests {
         // Origin closest to the interior (ray pointing away).
         check_grad(v(0.3, 0.3, 1.6), v(0.1, 0.0, 1.0).normalize(), tri);
         // Grazing: ray almost parallel to the triangle plane, just above it.
-        check_grad(v(-0.5, 0.3, 0.95), v(1.0, 0.01, 0.02).normalize(), [v(0.0, 0.0, 0.9), v(1.0, 0.0, 0.9), v(0.0, 1.0, 0.9)]);
+        check_grad(
+            v(-0.5, 0.3, 0.95),
+            v(1.0, 0.01, 0.02).normalize(),
+            [v(0.0, 0.0, 0.9), v(1.0, 0.0, 0.9), v(0.0, 1.0, 0.9)],
+        );
     }
 
     #[test]
     fn degenerate_triangles_give_finite_values() {
         let o = v(0.1, 0.2, -1.0);
         let r = v(0.0, 0.0, 1.0);
-        for tri in [[v(0.0, 0.0, 0.0); 3], [v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(2.0, 0.0, 0.0)]] {
+        for tri in [
+            [v(0.0, 0.0, 0.0); 3],
+            [v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(2.0, 0.0, 0.0)],
+        ] {
             let pd = ray_triangle_distance(&o, &r, &tri);
             assert!(pd.d2.is_finite() && !pd.pierced);
             let g = pd.grad(&o, &r, &tri);
-            assert!(g.vertices.iter().chain([&g.origin, &g.dir]).all(|x| x.iter().all(|c| c.is_finite())));
+            assert!(
+                g.vertices
+                    .iter()
+                    .chain([&g.origin, &g.dir])
+                    .all(|x| x.iter().all(|c| c.is_finite()))
+            );
         }
         // A ray parallel to the segment.
         let (d2, _, _) = segment_ray(&v(0.0, 1.0, 0.0), &v(0.0, 1.0, 1.0), &v(0.0, 0.0, 0.0), &r);

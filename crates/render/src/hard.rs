@@ -9,7 +9,13 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 /// The nearest hit of a half-line: `(t, triangle)`.
-pub fn first_hit<T: Real>(bvh: &Bvh<T>, vertices: &[Vector3<T>], triangles: &[[u32; 3]], o: &Vector3<T>, r: &Vector3<T>) -> Option<(T, u32)> {
+pub fn first_hit<T: Real>(
+    bvh: &Bvh<T>,
+    vertices: &[Vector3<T>],
+    triangles: &[[u32; 3]],
+    o: &Vector3<T>,
+    r: &Vector3<T>,
+) -> Option<(T, u32)> {
     let mut best: Option<(T, u32)> = None;
     bvh.for_each_near_ray(o, &inverse_dir(r), T::zero(), |t| {
         let tri = triangles[t as usize].map(|v| vertices[v as usize]);
@@ -23,7 +29,12 @@ pub fn first_hit<T: Real>(bvh: &Bvh<T>, vertices: &[Vector3<T>], triangles: &[[u
 }
 
 /// A `width × height` mask (row-major): true where the pixel's reflected ray hits the mesh.
-pub fn hard_mask<T: Real>(rays: &ReflectedRays<T>, bvh: &Bvh<T>, vertices: &[Vector3<T>], triangles: &[[u32; 3]]) -> Vec<bool> {
+pub fn hard_mask<T: Real>(
+    rays: &ReflectedRays<T>,
+    bvh: &Bvh<T>,
+    vertices: &[Vector3<T>],
+    triangles: &[[u32; 3]],
+) -> Vec<bool> {
     let hits: Vec<bool> = (0..rays.len())
         .into_par_iter()
         .map(|i| first_hit(bvh, vertices, triangles, &rays.origin[i], &rays.dir[i]).is_some())

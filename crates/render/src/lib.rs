@@ -23,7 +23,10 @@ pub mod shapes;
 pub mod sphere_trace;
 
 pub use bvh::Bvh;
-pub use occupancy::{Aggregation, Culling, Nearest, Occupancy, OccupancyGrad, OccupancyParams, SoftRenderer, soft_iou_loss};
+pub use occupancy::{
+    Aggregation, Culling, Nearest, Occupancy, OccupancyGrad, OccupancyParams, SoftRenderer,
+    soft_iou_loss,
+};
 pub use reflect::{Normals, ReflectedRays, reflect_camera};
 pub use sdf::{Bowl, Capsule, PlacedSdf, RoundedCylinder, Sdf, Sphere};
 pub use sphere_trace::{SurfaceMethod, TraceParams};

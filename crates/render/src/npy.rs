@@ -5,9 +5,13 @@ use std::path::Path;
 
 /// A row-major `[height, width]` array as f64, with its shape.
 pub fn read_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), RenderError> {
-    let fail = |r: String| RenderError::File { path: path.into(), reason: r };
+    let fail = |r: String| RenderError::File {
+        path: path.into(),
+        reason: r,
+    };
     let bytes = std::fs::read(path).map_err(|e| fail(e.to_string()))?;
-    let npy = npyz::NpyFile::new(bytes.as_slice()).map_err(|e| fail(format!("not a .npy file: {e}")))?;
+    let npy =
+        npyz::NpyFile::new(bytes.as_slice()).map_err(|e| fail(format!("not a .npy file: {e}")))?;
     if npy.order() != npyz::Order::C {
         return Err(fail("Fortran-ordered arrays are not supported".into()));
     }
@@ -18,11 +22,30 @@ pub fn read_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), RenderError> {
     let descr = npy.dtype().descr().trim_matches('\'').to_string();
     let io = |e: std::io::Error| fail(format!("truncated or corrupt data: {e}"));
     let data: Vec<f64> = match descr.as_str() {
-        "|u1" => npy.into_vec::<u8>().map_err(io)?.into_iter().map(f64::from).collect(),
-        "|b1" => npy.into_vec::<bool>().map_err(io)?.into_iter().map(|b| if b { 1.0 } else { 0.0 }).collect(),
-        "<f4" => npy.into_vec::<f32>().map_err(io)?.into_iter().map(f64::from).collect(),
+        "|u1" => npy
+            .into_vec::<u8>()
+            .map_err(io)?
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+        "|b1" => npy
+            .into_vec::<bool>()
+            .map_err(io)?
+            .into_iter()
+            .map(|b| if b { 1.0 } else { 0.0 })
+            .collect(),
+        "<f4" => npy
+            .into_vec::<f32>()
+            .map_err(io)?
+            .into_iter()
+            .map(f64::from)
+            .collect(),
         "<f8" => npy.into_vec::<f64>().map_err(io)?,
-        d => return Err(fail(format!("unsupported dtype {d} (use uint8, bool, float32 or float64)"))),
+        d => {
+            return Err(fail(format!(
+                "unsupported dtype {d} (use uint8, bool, float32 or float64)"
+            )));
+        }
     };
     if data.len() as u64 != h * w {
         return Err(fail(format!("{} values for shape {h}×{w}", data.len())));

@@ -79,7 +79,11 @@ impl Default for OccupancyParams {
     /// (cull radius 4.0 σ^½ instead of 3.0 σ^½) it differs by 2e-5, for 1.5× the time
     /// (`irmirror bench render`).
     fn default() -> Self {
-        Self { sigma_m2: 1e-4, epsilon: 1e-7, aggregation: Aggregation::Product }
+        Self {
+            sigma_m2: 1e-4,
+            epsilon: 1e-7,
+            aggregation: Aggregation::Product,
+        }
     }
 }
 
@@ -103,7 +107,11 @@ pub enum Culling {
 /// Numerically stable `softplus(x) = ln(1 + eˣ)`.
 #[inline]
 fn softplus<T: Real>(x: T) -> T {
-    if x > T::zero() { x + (-x).exp().ln_1p() } else { x.exp().ln_1p() }
+    if x > T::zero() {
+        x + (-x).exp().ln_1p()
+    } else {
+        x.exp().ln_1p()
+    }
 }
 
 #[inline]
@@ -204,7 +212,10 @@ impl<T: Real> SoftRenderer<T> {
             for k in 0..3 {
                 let (a, b) = (tri[k], tri[(k + 1) % 3]);
                 let id = *index.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    r.edges.push(Edge { v: [a, b], f: [f as u32, NO_FACE] });
+                    r.edges.push(Edge {
+                        v: [a, b],
+                        f: [f as u32, NO_FACE],
+                    });
                     (r.edges.len() - 1) as u32
                 });
                 let e = &mut r.edges[id as usize];
@@ -228,13 +239,20 @@ impl<T: Real> SoftRenderer<T> {
 
     fn update_spheres(&mut self) {
         let (v, t) = (&self.vertices, &self.triangles);
-        self.spheres.par_iter_mut().zip(self.normals.par_iter_mut()).zip(t.par_iter()).for_each(|((s, n), tri)| {
-            let [a, b, c] = tri.map(|i| v[i as usize]);
-            let m = (a + b + c) / T::of(3.0);
-            let r2 = (a - m).norm_squared().max((b - m).norm_squared()).max((c - m).norm_squared());
-            *s = (m, r2.sqrt());
-            *n = (b - a).cross(&(c - a));
-        });
+        self.spheres
+            .par_iter_mut()
+            .zip(self.normals.par_iter_mut())
+            .zip(t.par_iter())
+            .for_each(|((s, n), tri)| {
+                let [a, b, c] = tri.map(|i| v[i as usize]);
+                let m = (a + b + c) / T::of(3.0);
+                let r2 = (a - m)
+                    .norm_squared()
+                    .max((b - m).norm_squared())
+                    .max((c - m).norm_squared());
+                *s = (m, r2.sqrt());
+                *n = (b - a).cross(&(c - a));
+            });
     }
 
     /// The vertices, depth frame.
@@ -259,7 +277,14 @@ impl<T: Real> SoftRenderer<T> {
     /// Visits the triangles that may lie within `radius` of the half-line (every one for
     /// [`Culling::Dense`]); pierced triangles are always visited.
     #[inline]
-    fn for_each_near(&self, o: &Vector3<T>, r: &Vector3<T>, radius: T, culling: Culling, mut visit: impl FnMut(u32)) {
+    fn for_each_near(
+        &self,
+        o: &Vector3<T>,
+        r: &Vector3<T>,
+        radius: T,
+        culling: Culling,
+        mut visit: impl FnMut(u32),
+    ) {
         match culling {
             Culling::Dense => (0..self.triangles.len() as u32).for_each(visit),
             Culling::Bvh => self.bvh.for_each_near_ray(o, &inverse_dir(r), radius, |t| {
@@ -277,7 +302,14 @@ impl<T: Real> SoftRenderer<T> {
 
     /// Visits the pairs of one ray that contribute: `f(triangle, pair distance, x)`.
     #[inline]
-    fn for_each_pair(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, mut f: impl FnMut(u32, &[Vector3<T>; 3], &PairDistance<T>, T)) {
+    fn for_each_pair(
+        &self,
+        o: &Vector3<T>,
+        r: &Vector3<T>,
+        p: &OccupancyParams,
+        culling: Culling,
+        mut f: impl FnMut(u32, &[Vector3<T>; 3], &PairDistance<T>, T),
+    ) {
         let inv_sigma = T::of(1.0 / p.sigma_m2);
         let cull = match culling {
             Culling::Dense => T::max_value().unwrap_or(T::one()),
@@ -287,7 +319,11 @@ impl<T: Real> SoftRenderer<T> {
             let tri = self.tri(t);
             let pd = ray_triangle_distance(o, r, &tri);
             if pd.pierced || pd.d2 <= cull {
-                let x = if pd.pierced { pd.d2 * inv_sigma } else { -pd.d2 * inv_sigma };
+                let x = if pd.pierced {
+                    pd.d2 * inv_sigma
+                } else {
+                    -pd.d2 * inv_sigma
+                };
                 f(t, &tri, &pd, x);
             }
         });
@@ -304,7 +340,14 @@ impl<T: Real> SoftRenderer<T> {
 
     /// [`Aggregation::Silhouette`] for one ray: `(x, what sets it, triangles visited)`.
     /// `cand` is scratch.
-    fn silhouette_ray(&self, o: &Vector3<T>, r: &Vector3<T>, p: &OccupancyParams, culling: Culling, cand: &mut Vec<(T, T, T, u32)>) -> (T, Option<Nearest<T>>, u32) {
+    fn silhouette_ray(
+        &self,
+        o: &Vector3<T>,
+        r: &Vector3<T>,
+        p: &OccupancyParams,
+        culling: Culling,
+        cand: &mut Vec<(T, T, T, u32)>,
+    ) -> (T, Option<Nearest<T>>, u32) {
         let inv_sigma = T::of(1.0 / p.sigma_m2);
         let cull = T::of(p.cull_d2());
         let mut visited = 0u32;
@@ -323,7 +366,10 @@ impl<T: Real> SoftRenderer<T> {
                 }
                 let pd = ray_triangle_distance(o, r, &self.tri(t));
                 if pd.d2 <= best_d2 {
-                    best = Some(Nearest { vertices: self.triangles[t as usize], pair: pd });
+                    best = Some(Nearest {
+                        vertices: self.triangles[t as usize],
+                        pair: pd,
+                    });
                     return pd.d2.sqrt();
                 }
                 best_d2.sqrt()
@@ -332,7 +378,10 @@ impl<T: Real> SoftRenderer<T> {
                 Culling::Dense => (0..self.triangles.len() as u32).for_each(|t| {
                     consider(t);
                 }),
-                Culling::Bvh => self.bvh.for_each_near_ray_shrinking(o, &inverse_dir(r), cull.sqrt(), consider),
+                Culling::Bvh => {
+                    self.bvh
+                        .for_each_near_ray_shrinking(o, &inverse_dir(r), cull.sqrt(), consider)
+                }
             }
             let x = best.map_or(-cull * inv_sigma, |b| -b.pair.d2 * inv_sigma);
             return (x, best, visited);
@@ -347,7 +396,10 @@ impl<T: Real> SoftRenderer<T> {
                 if edge.f[0] != t {
                     continue;
                 }
-                let contour = edge.f[1] == NO_FACE || self.normals[edge.f[0] as usize].dot(r) * self.normals[edge.f[1] as usize].dot(r) <= T::zero();
+                let contour = edge.f[1] == NO_FACE
+                    || self.normals[edge.f[0] as usize].dot(r)
+                        * self.normals[edge.f[1] as usize].dot(r)
+                        <= T::zero();
                 if !contour {
                     continue;
                 }
@@ -368,22 +420,42 @@ impl<T: Real> SoftRenderer<T> {
             let w = a + (b - a) * u - (o + r * s);
             let w_perp = w - r * w.dot(r);
             let n = w_perp.norm();
-            let exposed = n <= past * T::of(1e-3) || !self.hits(&(o + w_perp * ((n + past) / n)), r, culling);
+            let exposed =
+                n <= past * T::of(1e-3) || !self.hits(&(o + w_perp * ((n + past) / n)), r, culling);
             if exposed {
-                let pair = PairDistance { d2, s, bary: [T::one() - u, u, T::zero()], pierced: true };
-                return (d2 * inv_sigma, Some(Nearest { vertices: [ia, ib, ib], pair }), visited);
+                let pair = PairDistance {
+                    d2,
+                    s,
+                    bary: [T::one() - u, u, T::zero()],
+                    pierced: true,
+                };
+                return (
+                    d2 * inv_sigma,
+                    Some(Nearest {
+                        vertices: [ia, ib, ib],
+                        pair,
+                    }),
+                    visited,
+                );
             }
         }
         (cull * inv_sigma, None, visited)
     }
 
     /// `I_i` for every ray.
-    pub fn forward(&self, rays: &ReflectedRays<T>, params: &OccupancyParams, culling: Culling) -> Occupancy<T> {
+    pub fn forward(
+        &self,
+        rays: &ReflectedRays<T>,
+        params: &OccupancyParams,
+        culling: Culling,
+    ) -> Occupancy<T> {
         if params.aggregation == Aggregation::Silhouette {
             let results: Vec<(T, Option<Nearest<T>>, u32)> = (0..rays.len())
                 .into_par_iter()
                 .with_min_len(4)
-                .map_init(Vec::new, |cand, i| self.silhouette_ray(&rays.origin[i], &rays.dir[i], params, culling, cand))
+                .map_init(Vec::new, |cand, i| {
+                    self.silhouette_ray(&rays.origin[i], &rays.dir[i], params, culling, cand)
+                })
                 .collect();
             return Occupancy {
                 value: results.iter().map(|r| sigmoid(r.0)).collect(),
@@ -399,10 +471,16 @@ impl<T: Real> SoftRenderer<T> {
             .map(|i| {
                 let mut log_c = T::zero();
                 let mut n = 0u32;
-                self.for_each_pair(&rays.origin[i], &rays.dir[i], params, culling, |_, _, _, x| {
-                    log_c -= softplus(x);
-                    n += 1;
-                });
+                self.for_each_pair(
+                    &rays.origin[i],
+                    &rays.dir[i],
+                    params,
+                    culling,
+                    |_, _, _, x| {
+                        log_c -= softplus(x);
+                        n += 1;
+                    },
+                );
                 (log_c, n)
             })
             .collect();
@@ -457,10 +535,16 @@ impl<T: Real> SoftRenderer<T> {
                     let (o, r) = (&rays.origin[i], &rays.dir[i]);
                     if params.aggregation == Aggregation::Silhouette {
                         // ∂L/∂x = g I (1 − I); x = ±d²/σ.
-                        let Some(Some(near)) = occ.nearest.get(i) else { continue };
+                        let Some(Some(near)) = occ.nearest.get(i) else {
+                            continue;
+                        };
                         let v = occ.value[i];
                         let dx = g * v * (T::one() - v);
-                        let dd2 = if near.pair.pierced { dx * inv_sigma } else { -dx * inv_sigma };
+                        let dd2 = if near.pair.pierced {
+                            dx * inv_sigma
+                        } else {
+                            -dx * inv_sigma
+                        };
                         let tri = near.vertices.map(|k| this.vertices[k as usize]);
                         let pg = near.pair.grad(o, r, &tri);
                         d_o[k] += pg.origin * dd2;
@@ -477,7 +561,11 @@ impl<T: Real> SoftRenderer<T> {
                         if dx == T::zero() {
                             return;
                         }
-                        let dd2 = if pd.pierced { dx * inv_sigma } else { -dx * inv_sigma };
+                        let dd2 = if pd.pierced {
+                            dx * inv_sigma
+                        } else {
+                            -dx * inv_sigma
+                        };
                         let pg = pd.grad(o, r, tri);
                         d_o[k] += pg.origin * dd2;
                         d_r[k] += pg.dir * dd2;
@@ -498,7 +586,12 @@ impl<T: Real> SoftRenderer<T> {
 
 /// `1 − soft IoU` between per-ray occupancy (scattered to pixels; 0 where no ray) and a target
 /// mask over all pixels, and `∂L/∂I_i` per ray.
-pub fn soft_iou_loss<T: Real>(rays: &ReflectedRays<T>, occupancy: &[T], target: &[T], d_value: &mut Vec<T>) -> T {
+pub fn soft_iou_loss<T: Real>(
+    rays: &ReflectedRays<T>,
+    occupancy: &[T],
+    target: &[T],
+    d_value: &mut Vec<T>,
+) -> T {
     // Σ over pixels without rays: I = 0 there, so only the target adds to the union.
     let target_sum: T = target.iter().fold(T::zero(), |a, &t| a + t);
     let mut inter = T::zero();

@@ -65,12 +65,25 @@ impl<T: Real> ReflectedRays<T> {
         out.dir.clear();
         out.normal.clear();
         for &i in indices {
-            out.push(self.pixel[i], self.object[i], self.origin[i], self.dir[i], self.normal[i]);
+            out.push(
+                self.pixel[i],
+                self.object[i],
+                self.origin[i],
+                self.dir[i],
+                self.normal[i],
+            );
         }
     }
 
     /// Appends one ray.
-    pub fn push(&mut self, pixel: u32, object: u16, origin: Vector3<T>, dir: Vector3<T>, normal: Vector3<T>) {
+    pub fn push(
+        &mut self,
+        pixel: u32,
+        object: u16,
+        origin: Vector3<T>,
+        dir: Vector3<T>,
+        normal: Vector3<T>,
+    ) {
         self.pixel.push(pixel);
         self.object.push(object);
         self.origin.push(origin);
@@ -81,7 +94,15 @@ impl<T: Real> ReflectedRays<T> {
     /// Converts the scalar type.
     pub fn cast<U: Real>(&self) -> ReflectedRays<U> {
         let c = |v: &Vec<Vector3<T>>| v.iter().map(|x| x.map(|a| U::of(a.to_f64()))).collect();
-        ReflectedRays { width: self.width, height: self.height, pixel: self.pixel.clone(), object: self.object.clone(), origin: c(&self.origin), dir: c(&self.dir), normal: c(&self.normal) }
+        ReflectedRays {
+            width: self.width,
+            height: self.height,
+            pixel: self.pixel.clone(),
+            object: self.object.clone(),
+            origin: c(&self.origin),
+            dir: c(&self.dir),
+            normal: c(&self.normal),
+        }
     }
 }
 
@@ -99,11 +120,16 @@ pub fn reflect_camera(
     let hits: Vec<Option<(u16, Vector3<f64>, SurfaceHit)>> = (0..w * h)
         .into_par_iter()
         .map(|p| {
-            let ray = depth_from_camera.transform_ray(&camera.pixel_ray::<f64>((p % w) as u32, (p / w) as u32));
+            let ray = depth_from_camera
+                .transform_ray(&camera.pixel_ray::<f64>((p % w) as u32, (p / w) as u32));
             nearest_hit(objects, &ray, trace_params).map(|(k, hit)| (k, ray.dir, hit))
         })
         .collect();
-    let mut out = ReflectedRays { width: camera.width, height: camera.height, ..Default::default() };
+    let mut out = ReflectedRays {
+        width: camera.width,
+        height: camera.height,
+        ..Default::default()
+    };
     for (p, hit) in hits.iter().enumerate() {
         let Some((k, dir, hit)) = hit else { continue };
         let n = match normals {
@@ -133,19 +159,42 @@ pub fn reflect_camera(
 }
 
 /// The nearest surface along `ray` among `objects`: (object index, hit).
-fn nearest_hit(objects: &[PlacedSdf], ray: &irmirror_geom::Ray<f64>, trace_params: &TraceParams) -> Option<(u16, SurfaceHit)> {
-    objects.iter().enumerate().filter_map(|(k, obj)| trace(obj, ray, trace_params).map(|hit| (k as u16, hit))).min_by(|a, b| a.1.t_m.total_cmp(&b.1.t_m))
+fn nearest_hit(
+    objects: &[PlacedSdf],
+    ray: &irmirror_geom::Ray<f64>,
+    trace_params: &TraceParams,
+) -> Option<(u16, SurfaceHit)> {
+    objects
+        .iter()
+        .enumerate()
+        .filter_map(|(k, obj)| trace(obj, ray, trace_params).map(|hit| (k as u16, hit)))
+        .min_by(|a, b| a.1.t_m.total_cmp(&b.1.t_m))
 }
 
 /// Sub-pixel offsets tried by [`reflect_footprint`], nearest the centre first (pixel units).
-const FOOTPRINT: [(f64, f64); 8] = [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -0.3), (0.3, 0.3), (-0.3, 0.3), (0.3, -0.3), (-0.3, -0.3)];
+const FOOTPRINT: [(f64, f64); 8] = [
+    (0.3, 0.0),
+    (-0.3, 0.0),
+    (0.0, 0.3),
+    (0.0, -0.3),
+    (0.3, 0.3),
+    (-0.3, 0.3),
+    (0.3, -0.3),
+    (-0.3, -0.3),
+];
 
 /// For each of `pixels` (row-major indices) whose centre ray misses every object, the first ray
 /// through its footprint (offsets ±0.3 px, nearest first) that hits one, reflected with the raw
 /// normal. A pixel integrates over its footprint, so a silhouette pixel whose centre misses can
 /// still show a reflection (a mug's thin rim): these rays let such a pixel count. Pixels whose
 /// centre hits, or whose whole footprint misses, give no ray.
-pub fn reflect_footprint(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>, objects: &[PlacedSdf], trace_params: &TraceParams, pixels: &[u32]) -> ReflectedRays<f64> {
+pub fn reflect_footprint(
+    camera: &PinholeCamera,
+    depth_from_camera: &Rigid3<f64>,
+    objects: &[PlacedSdf],
+    trace_params: &TraceParams,
+    pixels: &[u32],
+) -> ReflectedRays<f64> {
     let w = camera.width;
     let nearest = |ray: &irmirror_geom::Ray<f64>| nearest_hit(objects, ray, trace_params);
     // Per pixel: (pixel, object, camera ray direction, hit).
@@ -164,9 +213,19 @@ pub fn reflect_footprint(camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>
             })
         })
         .collect();
-    let mut out = ReflectedRays { width: camera.width, height: camera.height, ..Default::default() };
+    let mut out = ReflectedRays {
+        width: camera.width,
+        height: camera.height,
+        ..Default::default()
+    };
     for (p, k, dir, hit) in found.into_iter().flatten() {
-        out.push(p, k, hit.point, reflect(&dir, &hit.normal).normalize(), hit.normal);
+        out.push(
+            p,
+            k,
+            hit.point,
+            reflect(&dir, &hit.normal).normalize(),
+            hit.normal,
+        );
     }
     out
 }
@@ -195,9 +254,28 @@ mod tests {
     /// it, and trace settings tight enough for closed-form comparisons.
     fn mirror_sphere() -> (Vector3<f64>, PlacedSdf, PinholeCamera, TraceParams) {
         let c = Vector3::new(0.0, 0.0, 0.5);
-        let obj = PlacedSdf { sdf: Arc::new(Sphere { radius: 1.0 }), depth_from_object: Similarity3::new(Matrix3::identity(), c, 0.15).unwrap() };
-        let cam = PinholeCamera { width: 32, height: 24, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 };
-        (c, obj, cam, TraceParams { coarse_tol_rel: 1e-9, max_iters: 4000, ..TraceParams::default() })
+        let obj = PlacedSdf {
+            sdf: Arc::new(Sphere { radius: 1.0 }),
+            depth_from_object: Similarity3::new(Matrix3::identity(), c, 0.15).unwrap(),
+        };
+        let cam = PinholeCamera {
+            width: 32,
+            height: 24,
+            fx: 30.0,
+            fy: 30.0,
+            cx: 16.0,
+            cy: 12.0,
+        };
+        (
+            c,
+            obj,
+            cam,
+            TraceParams {
+                coarse_tol_rel: 1e-9,
+                max_iters: 4000,
+                ..TraceParams::default()
+            },
+        )
     }
 
     #[test]
@@ -205,7 +283,13 @@ mod tests {
         // For a camera ray hitting p, n = (p − c)/ρ and the reflection is r − 2 (r·n) n; check
         // point, direction, and the law of reflection.
         let (c, obj, cam, tight) = mirror_sphere();
-        let rays = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, Normals::Raw);
+        let rays = reflect_camera(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &tight,
+            Normals::Raw,
+        );
         assert!(rays.len() > 50);
         for i in 0..rays.len() {
             let p = rays.pixel[i];
@@ -231,20 +315,35 @@ mod tests {
     #[test]
     fn footprint_rays_match_the_closed_form() {
         let (c, obj, cam, tight) = mirror_sphere();
-        let centres = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, Normals::Raw);
+        let centres = reflect_camera(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &tight,
+            Normals::Raw,
+        );
         // The sphere's silhouette radius in pixels: 30 · tan(asin(0.15 / 0.5)) ≈ 9.43, so on
         // row 12 (through the centre) column 16 + 9 = 25 has its centre 9.5 px out (a miss)
         // and its footprint reaches 9.2 px (a hit).
         let edge = 12 * 32 + 25;
         assert!(!centres.pixel.contains(&edge));
-        let rays = reflect_footprint(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &tight, &[edge, 12 * 32 + 16, 12 * 32 + 31]);
+        let rays = reflect_footprint(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &tight,
+            &[edge, 12 * 32 + 16, 12 * 32 + 31],
+        );
         assert_eq!(rays.pixel, vec![edge]);
         let hit = rays.origin[0];
         let n = (hit - c) / 0.15;
         assert!((hit - c).norm() - 0.15 < 1e-7, "on the sphere");
         let d = hit.normalize();
         let (u, v) = cam.project(&hit).unwrap();
-        assert!((u - 25.5).abs() <= 0.3 + 1e-9 && (v - 12.5).abs() <= 0.3 + 1e-9, "inside the footprint: {u}, {v}");
+        assert!(
+            (u - 25.5).abs() <= 0.3 + 1e-9 && (v - 12.5).abs() <= 0.3 + 1e-9,
+            "inside the footprint: {u}, {v}"
+        );
         assert!((rays.dir[0] - (d - n * (2.0 * d.dot(&n)))).norm() < 1e-6);
     }
 
@@ -252,12 +351,36 @@ mod tests {
     fn smoothing_averages_neighbouring_normals_and_changes_only_normals() {
         let obj = PlacedSdf {
             sdf: Arc::new(Sphere { radius: 1.0 }),
-            depth_from_object: Similarity3::new(Matrix3::identity(), Vector3::new(0.0, 0.0, 0.5), 0.15).unwrap(),
+            depth_from_object: Similarity3::new(
+                Matrix3::identity(),
+                Vector3::new(0.0, 0.0, 0.5),
+                0.15,
+            )
+            .unwrap(),
         };
-        let cam = PinholeCamera { width: 32, height: 24, fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0 };
+        let cam = PinholeCamera {
+            width: 32,
+            height: 24,
+            fx: 30.0,
+            fy: 30.0,
+            cx: 16.0,
+            cy: 12.0,
+        };
         let p = TraceParams::default();
-        let raw = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &p, Normals::Raw);
-        let smooth = reflect_camera(&cam, &Rigid3::identity(), std::slice::from_ref(&obj), &p, Normals::Smoothed);
+        let raw = reflect_camera(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &p,
+            Normals::Raw,
+        );
+        let smooth = reflect_camera(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &p,
+            Normals::Smoothed,
+        );
         assert_eq!(raw.pixel, smooth.pixel);
         assert_eq!(raw.origin, smooth.origin);
         let i = raw.pixel.iter().position(|&q| q == 10 * 32 + 14).unwrap();

@@ -62,7 +62,11 @@ impl Capsule {
     fn closest(&self, p: &Vector3<f64>) -> Vector3<f64> {
         let ab = self.b - self.a;
         let l2 = ab.norm_squared();
-        let u = if l2 > 0.0 { ((p - self.a).dot(&ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
+        let u = if l2 > 0.0 {
+            ((p - self.a).dot(&ab) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         self.a + ab * u
     }
 }
@@ -96,7 +100,10 @@ pub struct RoundedCylinder {
 impl Sdf for RoundedCylinder {
     fn distance(&self, p: &Vector3<f64>) -> f64 {
         let r = self.rounding;
-        let d = Vector2::new(Vector2::new(p.x, p.z).norm() - self.radius + r, p.y.abs() - self.half_height + r);
+        let d = Vector2::new(
+            Vector2::new(p.x, p.z).norm() - self.radius + r,
+            p.y.abs() - self.half_height + r,
+        );
         d.x.max(d.y).min(0.0) + Vector2::new(d.x.max(0.0), d.y.max(0.0)).norm() - r
     }
     fn bounding_radius(&self) -> f64 {
@@ -120,7 +127,9 @@ pub struct Bowl {
 
 impl Bowl {
     fn rim_radius(&self) -> f64 {
-        (self.radius * self.radius - self.cut_height * self.cut_height).max(0.0).sqrt()
+        (self.radius * self.radius - self.cut_height * self.cut_height)
+            .max(0.0)
+            .sqrt()
     }
 }
 
@@ -152,12 +161,19 @@ pub struct PlacedSdf {
 impl PlacedSdf {
     /// Signed distance at a depth-frame point, metres.
     pub fn distance(&self, p_depth: &Vector3<f64>) -> f64 {
-        self.depth_from_object.scale * self.sdf.distance(&self.depth_from_object.inverse_transform_point(p_depth))
+        self.depth_from_object.scale
+            * self
+                .sdf
+                .distance(&self.depth_from_object.inverse_transform_point(p_depth))
     }
     /// Unit outward normal at a depth-frame point (the rotated, normalised SDF gradient).
     pub fn normal(&self, p_depth: &Vector3<f64>) -> Vector3<f64> {
-        let g = self.sdf.gradient(&self.depth_from_object.inverse_transform_point(p_depth));
-        (self.depth_from_object.rotation * g).try_normalize(0.0).unwrap_or_else(Vector3::y)
+        let g = self
+            .sdf
+            .gradient(&self.depth_from_object.inverse_transform_point(p_depth));
+        (self.depth_from_object.rotation * g)
+            .try_normalize(0.0)
+            .unwrap_or_else(Vector3::y)
     }
 }
 
@@ -169,12 +185,28 @@ mod tests {
     fn analytic_gradients_match_finite_differences_and_are_unit() {
         let shapes: Vec<Box<dyn Sdf>> = vec![
             Box::new(Sphere { radius: 0.7 }),
-            Box::new(Capsule { a: Vector3::new(-0.3, 0.0, 0.1), b: Vector3::new(0.4, 0.2, 0.0), radius: 0.2 }),
-            Box::new(RoundedCylinder { radius: 0.5, rounding: 0.1, half_height: 0.6 }),
-            Box::new(Bowl { radius: 0.8, cut_height: 0.2, half_thickness: 0.03 }),
+            Box::new(Capsule {
+                a: Vector3::new(-0.3, 0.0, 0.1),
+                b: Vector3::new(0.4, 0.2, 0.0),
+                radius: 0.2,
+            }),
+            Box::new(RoundedCylinder {
+                radius: 0.5,
+                rounding: 0.1,
+                half_height: 0.6,
+            }),
+            Box::new(Bowl {
+                radius: 0.8,
+                cut_height: 0.2,
+                half_thickness: 0.03,
+            }),
         ];
         // Generic points (not on a medial axis or a crease of the field).
-        let pts = [Vector3::new(0.31, -0.52, 0.17), Vector3::new(-0.9, 0.25, 0.4), Vector3::new(0.1, 0.9, -0.35)];
+        let pts = [
+            Vector3::new(0.31, -0.52, 0.17),
+            Vector3::new(-0.9, 0.25, 0.4),
+            Vector3::new(0.1, 0.9, -0.35),
+        ];
         for s in &shapes {
             for p in &pts {
                 let g = s.gradient(p);
@@ -185,16 +217,29 @@ mod tests {
                     (s.distance(&(p + e)) - s.distance(&(p - e))) / (2.0 * h)
                 });
                 assert!((g - fd).norm() < 1e-6, "{g:?} vs {fd:?}");
-                assert!((g.norm() - 1.0).abs() < 1e-6, "exact SDFs have unit gradients");
+                assert!(
+                    (g.norm() - 1.0).abs() < 1e-6,
+                    "exact SDFs have unit gradients"
+                );
             }
         }
     }
 
     #[test]
     fn bowl_is_hollow_and_open_at_the_top() {
-        let b = Bowl { radius: 1.0, cut_height: 0.0, half_thickness: 0.02 };
-        assert!(b.distance(&Vector3::new(0.0, -1.0, 0.0)) < 0.0, "the bottom wall is solid");
-        assert!((b.distance(&Vector3::new(0.0, -0.5, 0.0)) - 0.48).abs() < 1e-12, "the inside is empty");
+        let b = Bowl {
+            radius: 1.0,
+            cut_height: 0.0,
+            half_thickness: 0.02,
+        };
+        assert!(
+            b.distance(&Vector3::new(0.0, -1.0, 0.0)) < 0.0,
+            "the bottom wall is solid"
+        );
+        assert!(
+            (b.distance(&Vector3::new(0.0, -0.5, 0.0)) - 0.48).abs() < 1e-12,
+            "the inside is empty"
+        );
         assert!(b.distance(&Vector3::new(0.0, 0.5, 0.0)) > 0.4, "no lid");
     }
 
@@ -202,9 +247,17 @@ mod tests {
     fn placement_scales_distances() {
         let placed = PlacedSdf {
             sdf: Arc::new(Sphere { radius: 1.0 }),
-            depth_from_object: Similarity3::new(nalgebra::Matrix3::identity(), Vector3::new(0.0, 0.0, 0.5), 0.15).unwrap(),
+            depth_from_object: Similarity3::new(
+                nalgebra::Matrix3::identity(),
+                Vector3::new(0.0, 0.0, 0.5),
+                0.15,
+            )
+            .unwrap(),
         };
         assert!((placed.distance(&Vector3::new(0.0, 0.0, 0.0)) - 0.35).abs() < 1e-12);
-        assert!((placed.normal(&Vector3::new(0.0, 0.0, 0.2)) - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
+        assert!(
+            (placed.normal(&Vector3::new(0.0, 0.0, 0.2)) - Vector3::new(0.0, 0.0, -1.0)).norm()
+                < 1e-12
+        );
     }
 }

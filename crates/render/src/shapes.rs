@@ -54,12 +54,20 @@ impl Shape {
             Shape::Bowl { cut, wall } => {
                 // Shell radius so that the bowl fits the unit sphere.
                 let r = 0.95;
-                Arc::new(Bowl { radius: r, cut_height: cut * r, half_thickness: 0.5 * wall * r })
+                Arc::new(Bowl {
+                    radius: r,
+                    cut_height: cut * r,
+                    half_thickness: 0.5 * wall * r,
+                })
             }
             Shape::Mug { aspect, wall } => {
                 // Fit height 2h and radius ρ (with handle) into the unit sphere.
                 let rho = 0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2;
-                Arc::new(Mug { radius: rho, half_height: aspect * rho, wall: wall * rho })
+                Arc::new(Mug {
+                    radius: rho,
+                    half_height: aspect * rho,
+                    wall: wall * rho,
+                })
             }
             Shape::Car { cabin, height } => Arc::new(Car { cabin, height }),
         }
@@ -77,7 +85,10 @@ impl Shape {
 }
 
 fn capped_cylinder(p: &Vector3<f64>, radius: f64, y0: f64, y1: f64) -> f64 {
-    let d = Vector2::new(Vector2::new(p.x, p.z).norm() - radius, (p.y - 0.5 * (y0 + y1)).abs() - 0.5 * (y1 - y0));
+    let d = Vector2::new(
+        Vector2::new(p.x, p.z).norm() - radius,
+        (p.y - 0.5 * (y0 + y1)).abs() - 0.5 * (y1 - y0),
+    );
     d.x.max(d.y).min(0.0) + Vector2::new(d.x.max(0.0), d.y.max(0.0)).norm()
 }
 
@@ -102,7 +113,8 @@ impl Sdf for Mug {
         let c = Vector2::new(self.radius, 0.0);
         let big = 0.45 * h;
         let q = Vector2::new((Vector2::new(p.x, p.y) - c).norm() - big, p.z);
-        let handle = (q.norm() - 0.35 * self.wall.max(0.05)).max(self.radius - 0.5 * self.wall - p.x);
+        let handle =
+            (q.norm() - 0.35 * self.wall.max(0.05)).max(self.radius - 0.5 * self.wall - p.x);
         shell.min(handle)
     }
     fn bounding_radius(&self) -> f64 {
@@ -128,7 +140,11 @@ impl Sdf for Car {
     fn distance(&self, p: &Vector3<f64>) -> f64 {
         let (len, h) = (0.95, self.height * 0.95 * 2.0);
         let lower_h = 0.55 * h;
-        let body = rounded_box(&(p - Vector3::new(0.0, -h / 2.0 + lower_h / 2.0, 0.0)), &Vector3::new(len, lower_h / 2.0, 0.4), 0.12);
+        let body = rounded_box(
+            &(p - Vector3::new(0.0, -h / 2.0 + lower_h / 2.0, 0.0)),
+            &Vector3::new(len, lower_h / 2.0, 0.4),
+            0.12,
+        );
         let cab_h = h - lower_h;
         let cabin = rounded_box(
             &(p - Vector3::new(-0.1 * len, -h / 2.0 + lower_h + cab_h / 2.0 - 0.05, 0.0)),
@@ -151,24 +167,64 @@ mod tests {
 
     #[test]
     fn shapes_fit_the_unit_sphere_and_stand_on_their_base() {
-        for s in [Shape::Bowl { cut: 0.0, wall: 0.06 }, Shape::Mug { aspect: 1.1, wall: 0.1 }, Shape::Car { cabin: 0.5, height: 0.3 }] {
+        for s in [
+            Shape::Bowl {
+                cut: 0.0,
+                wall: 0.06,
+            },
+            Shape::Mug {
+                aspect: 1.1,
+                wall: 0.1,
+            },
+            Shape::Car {
+                cabin: 0.5,
+                height: 0.3,
+            },
+        ] {
             let sdf = s.sdf();
             // Far points are outside; the base point is on the surface.
             assert!(sdf.distance(&Vector3::new(0.0, 0.0, 1.2)) > 0.0);
             let r = sdf.bounding_radius();
-            for dir in [Vector3::x(), Vector3::y(), Vector3::z(), -Vector3::x(), -Vector3::y(), -Vector3::z()] {
-                assert!(sdf.distance(&(dir * (r + 1e-3))) > 0.0, "{s:?} pokes out of its bounding sphere");
+            for dir in [
+                Vector3::x(),
+                Vector3::y(),
+                Vector3::z(),
+                -Vector3::x(),
+                -Vector3::y(),
+                -Vector3::z(),
+            ] {
+                assert!(
+                    sdf.distance(&(dir * (r + 1e-3))) > 0.0,
+                    "{s:?} pokes out of its bounding sphere"
+                );
             }
-            let m = irmirror_geom::isosurface::isosurface(|p| sdf.distance(p), Vector3::repeat(-1.0), Vector3::repeat(1.0), 48);
-            let ymin = m.vertices.iter().map(|v| f64::from(v[1])).fold(f64::MAX, f64::min);
-            assert!((ymin - s.base_y()).abs() < 0.03, "{s:?}: base {ymin} vs {}", s.base_y());
+            let m = irmirror_geom::isosurface::isosurface(
+                |p| sdf.distance(p),
+                Vector3::repeat(-1.0),
+                Vector3::repeat(1.0),
+                48,
+            );
+            let ymin = m
+                .vertices
+                .iter()
+                .map(|v| f64::from(v[1]))
+                .fold(f64::MAX, f64::min);
+            assert!(
+                (ymin - s.base_y()).abs() < 0.03,
+                "{s:?}: base {ymin} vs {}",
+                s.base_y()
+            );
             assert!(m.signed_volume() > 0.0);
         }
     }
 
     #[test]
     fn mug_is_open_and_hollow() {
-        let m = Mug { radius: 0.5, half_height: 0.5, wall: 0.05 };
+        let m = Mug {
+            radius: 0.5,
+            half_height: 0.5,
+            wall: 0.05,
+        };
         assert!(m.distance(&Vector3::new(0.0, 0.0, 0.0)) > 0.3, "cavity");
         assert!(m.distance(&Vector3::new(0.0, -0.49, 0.0)) < 0.0, "bottom");
         assert!(m.distance(&Vector3::new(0.0, 0.6, 0.0)) > 0.0, "open top");

@@ -35,7 +35,11 @@ pub struct TraceParams {
 
 impl Default for TraceParams {
     fn default() -> Self {
-        Self { coarse_tol_rel: 1.0 / 64.0, method: SurfaceMethod::SphereTrace { steps: 3 }, max_iters: 512 }
+        Self {
+            coarse_tol_rel: 1.0 / 64.0,
+            method: SurfaceMethod::SphereTrace { steps: 3 },
+            max_iters: 512,
+        }
     }
 }
 
@@ -101,7 +105,11 @@ pub fn trace(object: &PlacedSdf, ray_depth: &Ray<f64>, params: &TraceParams) -> 
         }
     };
     let point = sim.transform_point(&p_object);
-    Some(SurfaceHit { t_m: t_coarse * sim.scale, point, normal: object.normal(&point) })
+    Some(SurfaceHit {
+        t_m: t_coarse * sim.scale,
+        point,
+        normal: object.normal(&point),
+    })
 }
 
 #[cfg(test)]
@@ -117,11 +125,21 @@ mod tests {
     fn placed_sphere(scale: f64) -> PlacedSdf {
         let rot = axis_angle_to_matrix(&Vector3::new(0.3, -1.1, 0.4));
         let c = Vector3::new(0.3, 0.0, 0.0);
-        PlacedSdf { sdf: Arc::new(Capsule { a: c, b: c, radius: 0.5 }), depth_from_object: Similarity3::new(rot, Vector3::new(0.02, -0.01, 0.5), scale).unwrap() }
+        PlacedSdf {
+            sdf: Arc::new(Capsule {
+                a: c,
+                b: c,
+                radius: 0.5,
+            }),
+            depth_from_object: Similarity3::new(rot, Vector3::new(0.02, -0.01, 0.5), scale)
+                .unwrap(),
+        }
     }
 
     fn centre(scale: f64) -> Vector3<f64> {
-        placed_sphere(scale).depth_from_object.transform_point(&Vector3::new(0.3, 0.0, 0.0))
+        placed_sphere(scale)
+            .depth_from_object
+            .transform_point(&Vector3::new(0.3, 0.0, 0.0))
     }
 
     /// Closed form: |o + t r − c|² = ρ² with ρ = 0.5 · scale.
@@ -138,16 +156,26 @@ mod tests {
     fn sphere_tracing_a_rotated_scaled_sphere_matches_closed_form() {
         for scale in [0.15, 0.05, 2.0] {
             let obj = placed_sphere(scale);
-            let tight = TraceParams { coarse_tol_rel: 1e-7, method: SurfaceMethod::SphereTrace { steps: 3 }, max_iters: 2000 };
+            let tight = TraceParams {
+                coarse_tol_rel: 1e-7,
+                method: SurfaceMethod::SphereTrace { steps: 3 },
+                max_iters: 2000,
+            };
             let mut n = 0;
             for i in 0..40 {
                 let aim = centre(scale) - Vector3::new(0.0, 0.0, 0.0);
-                let dir = aim / aim.z + Vector3::new(-0.6 + 0.03 * i as f64, 0.2 - 0.008 * i as f64, 0.0) * scale / aim.z;
+                let dir = aim / aim.z
+                    + Vector3::new(-0.6 + 0.03 * i as f64, 0.2 - 0.008 * i as f64, 0.0) * scale
+                        / aim.z;
                 let ray = Ray::new(Vector3::zeros(), dir);
                 match (trace(&obj, &ray, &tight), analytic(&ray, scale)) {
                     (Some(h), Some(p)) => {
                         n += 1;
-                        assert!((h.point - p).norm() < 1e-6 * scale, "{:?} vs {p:?}", h.point);
+                        assert!(
+                            (h.point - p).norm() < 1e-6 * scale,
+                            "{:?} vs {p:?}",
+                            h.point
+                        );
                         let normal = (p - centre(scale)) / (0.5 * scale);
                         assert!((h.normal - normal).norm() < 1e-6);
                     }
@@ -164,14 +192,35 @@ mod tests {
         let obj = placed_sphere(0.15);
         let ray = Ray::new(Vector3::zeros(), Vector3::new(0.05, 0.02, 1.0));
         let exact = analytic(&ray, 0.15).unwrap();
-        let coarse = TraceParams { method: SurfaceMethod::SphereTrace { steps: 0 }, ..TraceParams::default() };
+        let coarse = TraceParams {
+            method: SurfaceMethod::SphereTrace { steps: 0 },
+            ..TraceParams::default()
+        };
         let err = |p: &TraceParams| (trace(&obj, &ray, p).unwrap().point - exact).norm();
         let e0 = err(&coarse);
         let e3 = err(&TraceParams::default());
-        let eproj = err(&TraceParams { method: SurfaceMethod::GradientProjection, ..TraceParams::default() });
+        let eproj = err(&TraceParams {
+            method: SurfaceMethod::GradientProjection,
+            ..TraceParams::default()
+        });
         assert!(e0 > 1e-4 && e3 < e0 * 1e-3, "coarse {e0}, K=3 {e3}");
         // The projection lands on the surface but off the ray.
-        assert!(obj.distance(&trace(&obj, &ray, &TraceParams { method: SurfaceMethod::GradientProjection, ..TraceParams::default() }).unwrap().point).abs() < 1e-9);
+        assert!(
+            obj.distance(
+                &trace(
+                    &obj,
+                    &ray,
+                    &TraceParams {
+                        method: SurfaceMethod::GradientProjection,
+                        ..TraceParams::default()
+                    }
+                )
+                .unwrap()
+                .point
+            )
+            .abs()
+                < 1e-9
+        );
         assert!(eproj > e3, "projection {eproj} vs K=3 {e3}");
     }
 
@@ -180,15 +229,30 @@ mod tests {
         // Bowl of radius 0.1 m, opening towards −Y of the depth frame (up in a camera with +Y down).
         let flip = axis_angle_to_matrix(&Vector3::new(std::f64::consts::PI, 0.0, 0.0));
         let bowl = PlacedSdf {
-            sdf: Arc::new(Bowl { radius: 1.0, cut_height: 0.0, half_thickness: 0.02 }),
+            sdf: Arc::new(Bowl {
+                radius: 1.0,
+                cut_height: 0.0,
+                half_thickness: 0.02,
+            }),
             depth_from_object: Similarity3::new(flip, Vector3::new(0.0, 0.0, 0.0), 0.1).unwrap(),
         };
         // Looking straight down (+Y in the depth frame) at the centre: hits the inner bottom.
         let ray = Ray::new(Vector3::new(0.0, -0.5, 0.0), Vector3::new(0.0, 1.0, 0.0));
         let h = trace(&bowl, &ray, &TraceParams::default()).unwrap();
         assert!((h.point.y - 0.098).abs() < 1e-4, "{:?}", h.point);
-        assert!(h.normal.y < -0.99, "the inner surface faces the viewer: {:?}", h.normal);
+        assert!(
+            h.normal.y < -0.99,
+            "the inner surface faces the viewer: {:?}",
+            h.normal
+        );
         // A ray passing beside the bowl misses.
-        assert!(trace(&bowl, &Ray::new(Vector3::new(0.2, -0.5, 0.0), Vector3::new(0.0, 1.0, 0.0)), &TraceParams::default()).is_none());
+        assert!(
+            trace(
+                &bowl,
+                &Ray::new(Vector3::new(0.2, -0.5, 0.0), Vector3::new(0.0, 1.0, 0.0)),
+                &TraceParams::default()
+            )
+            .is_none()
+        );
     }
 }

@@ -44,7 +44,10 @@ impl Category {
 
     /// Parses a category name.
     pub fn parse(name: &str) -> Result<Self, SdfError> {
-        Self::ALL.into_iter().find(|c| c.name() == name).ok_or_else(|| SdfError::UnknownCategory(name.to_string()))
+        Self::ALL
+            .into_iter()
+            .find(|c| c.name() == name)
+            .ok_or_else(|| SdfError::UnknownCategory(name.to_string()))
     }
 }
 
@@ -176,7 +179,10 @@ impl BowlParams {
         (0..=64)
             .map(|i| {
                 let s = i as f64 / 64.0;
-                Vector2::new(s * (1.0 + self.flare * s.powi(6)), self.depth * s.powf(self.exponent))
+                Vector2::new(
+                    s * (1.0 + self.flare * s.powi(6)),
+                    self.depth * s.powf(self.exponent),
+                )
             })
             .collect()
     }
@@ -195,7 +201,10 @@ impl MugParams {
         (0..=32)
             .map(|i| {
                 let th = std::f64::consts::PI * (0.5 - i as f64 / 32.0);
-                Vector2::new(x0 + (self.handle_reach + 0.5 * self.wall) * th.cos(), yc + b * th.sin())
+                Vector2::new(
+                    x0 + (self.handle_reach + 0.5 * self.wall) * th.cos(),
+                    yc + b * th.sin(),
+                )
             })
             .collect()
     }
@@ -219,7 +228,8 @@ impl MugParams {
 impl CarParams {
     fn profile(&self) -> Vec<Vector2<f64>> {
         let (c, b, r) = (self.clearance, self.belt, self.roof);
-        let tail = (-0.96f64).max(self.roof_rear - 0.05) * (1.0 - self.trunk) + (self.roof_rear - 0.3).max(-0.9) * self.trunk;
+        let tail = (-0.96f64).max(self.roof_rear - 0.05) * (1.0 - self.trunk)
+            + (self.roof_rear - 0.3).max(-0.9) * self.trunk;
         let tail_y = b + 0.03 * self.trunk + (1.0 - self.trunk) * 0.5 * (r - b);
         vec![
             Vector2::new(-1.0, c + 0.05),
@@ -279,7 +289,11 @@ impl FamilyShape {
                     windshield: uniform(rng, 0.15, 0.55),
                     rake: uniform(rng, 0.25, 0.45),
                     roof_rear: uniform(rng, -0.75, -0.3),
-                    trunk: if rng.random_bool(0.5) { uniform(rng, 0.6, 1.0) } else { uniform(rng, 0.0, 0.3) },
+                    trunk: if rng.random_bool(0.5) {
+                        uniform(rng, 0.6, 1.0)
+                    } else {
+                        uniform(rng, 0.0, 0.3)
+                    },
                     half_width: uniform(rng, 0.36, 0.45),
                     wheel: uniform(rng, 0.17, 0.2),
                     wheelbase: uniform(rng, 0.55, 0.7),
@@ -293,14 +307,23 @@ impl FamilyShape {
         match self {
             FamilyShape::Bowl(b) => {
                 let r = 1.0 + b.flare + 0.5 * b.wall;
-                (Vector3::new(-r, -0.5 * b.wall - b.foot_height - 0.02, -r), Vector3::new(r, b.depth + 0.5 * b.wall, r))
+                (
+                    Vector3::new(-r, -0.5 * b.wall - b.foot_height - 0.02, -r),
+                    Vector3::new(r, b.depth + 0.5 * b.wall, r),
+                )
             }
             FamilyShape::Mug(m) => {
                 let r = 1.0 + m.taper.max(0.0) + 0.01;
                 let x_max = m.handle_curve().iter().map(|q| q.x).fold(r, f64::max) + m.handle_tube;
-                (Vector3::new(-r, -0.01, -r), Vector3::new(x_max, m.height() + 0.01, r))
+                (
+                    Vector3::new(-r, -0.01, -r),
+                    Vector3::new(x_max, m.height() + 0.01, r),
+                )
             }
-            FamilyShape::Car(c) => (Vector3::new(-1.0, 0.0, -c.half_width), Vector3::new(1.0, c.roof, c.half_width)),
+            FamilyShape::Car(c) => (
+                Vector3::new(-1.0, 0.0, -c.half_width),
+                Vector3::new(1.0, c.roof, c.half_width),
+            ),
         }
     }
 
@@ -324,7 +347,13 @@ impl FamilyShape {
             FamilyShape::Mug(m) => (m.handle_curve(), m.section()),
             FamilyShape::Car(c) => (Vec::new(), c.profile()),
         };
-        PreparedShape { shape: *self, centre, k, curve, polygon }
+        PreparedShape {
+            shape: *self,
+            centre,
+            k,
+            curve,
+            polygon,
+        }
     }
 
     /// The surface as a watertight, outward-oriented mesh in the normalised frame: marching
@@ -339,7 +368,12 @@ impl FamilyShape {
         let cell = (hi - lo).max() / resolution as f64;
         let half = Vector3::repeat(cell * resolution as f64 / 2.0);
         let centre = (lo + hi) / 2.0;
-        irmirror_geom::isosurface::isosurface(|q| prepared.distance(q), centre - half, centre + half, resolution)
+        irmirror_geom::isosurface::isosurface(
+            |q| prepared.distance(q),
+            centre - half,
+            centre + half,
+            resolution,
+        )
     }
 }
 
@@ -364,7 +398,11 @@ impl PreparedShape {
                 let q = Vector2::new(rho, p.y);
                 let shell = polyline_distance(q, &self.curve) - 0.5 * b.wall;
                 if b.foot_height > 0.0 {
-                    let foot = sd_box2(q, Vector2::new(b.foot_radius, -0.25 * b.wall - 0.5 * b.foot_height), Vector2::new(0.4 * b.wall, 0.5 * b.foot_height + 0.25 * b.wall)) - 0.1 * b.wall;
+                    let foot = sd_box2(
+                        q,
+                        Vector2::new(b.foot_radius, -0.25 * b.wall - 0.5 * b.foot_height),
+                        Vector2::new(0.4 * b.wall, 0.5 * b.foot_height + 0.25 * b.wall),
+                    ) - 0.1 * b.wall;
                     smin(shell, foot, 0.04)
                 } else {
                     shell
@@ -381,20 +419,26 @@ impl PreparedShape {
                 let d2 = polygon_distance(Vector2::new(p.x, p.y), &self.polygon);
                 let r_edge = 0.08;
                 let w = Vector2::new(d2 + r_edge, p.z.abs() - c.half_width + r_edge);
-                let mut body = w.x.max(w.y).min(0.0) + Vector2::new(w.x.max(0.0), w.y.max(0.0)).norm() - r_edge;
+                let mut body = w.x.max(w.y).min(0.0)
+                    + Vector2::new(w.x.max(0.0), w.y.max(0.0)).norm()
+                    - r_edge;
                 for xw in [c.wheelbase, -c.wheelbase] {
                     let centre = Vector2::new(xw, c.wheel);
-                    let arch = ((Vector2::new(p.x, p.y) - centre).norm() - (c.wheel + 0.03)).max(c.half_width - 0.14 - p.z.abs());
+                    let arch = ((Vector2::new(p.x, p.y) - centre).norm() - (c.wheel + 0.03))
+                        .max(c.half_width - 0.14 - p.z.abs());
                     body = body.max(-arch);
                     let zc = c.half_width - 0.08;
-                    let wheel = sd_box2(Vector2::new((Vector2::new(p.x, p.y) - centre).norm(), p.z.abs()), Vector2::new(0.0, zc), Vector2::new(c.wheel - 0.02, 0.06)) - 0.02;
+                    let wheel = sd_box2(
+                        Vector2::new((Vector2::new(p.x, p.y) - centre).norm(), p.z.abs()),
+                        Vector2::new(0.0, zc),
+                        Vector2::new(c.wheel - 0.02, 0.06),
+                    ) - 0.02;
                     body = body.min(wheel);
                 }
                 body
             }
         }
     }
-
 
     /// Signed distance in the normalised object frame.
     pub fn distance(&self, q: &Vector3<f64>) -> f64 {
@@ -417,7 +461,12 @@ mod tests {
 
     #[test]
     fn polygon_distance_is_exact_on_a_square() {
-        let sq = [Vector2::new(-1.0, -1.0), Vector2::new(1.0, -1.0), Vector2::new(1.0, 1.0), Vector2::new(-1.0, 1.0)];
+        let sq = [
+            Vector2::new(-1.0, -1.0),
+            Vector2::new(1.0, -1.0),
+            Vector2::new(1.0, 1.0),
+            Vector2::new(-1.0, 1.0),
+        ];
         assert!((polygon_distance(Vector2::new(0.0, 0.0), &sq) + 1.0).abs() < 1e-12);
         assert!((polygon_distance(Vector2::new(3.0, 0.0), &sq) - 2.0).abs() < 1e-12);
         assert!((polygon_distance(Vector2::new(2.0, 2.0), &sq) - 2f64.sqrt()).abs() < 1e-12);

@@ -30,7 +30,13 @@ pub struct InferConfig {
 
 impl Default for InferConfig {
     fn default() -> Self {
-        Self { steps: 300, lr: 5e-3, latent_reg: 1e-4, batch: 2048, seed: 0 }
+        Self {
+            steps: 300,
+            lr: 5e-3,
+            latent_reg: 1e-4,
+            batch: 2048,
+            seed: 0,
+        }
     }
 }
 
@@ -45,7 +51,10 @@ pub struct Inferred {
 
 enum Target<'a> {
     Samples(&'a SdfSamples),
-    Surface { surface: &'a [[f32; 3]], free: &'a [[f32; 3]] },
+    Surface {
+        surface: &'a [[f32; 3]],
+        free: &'a [[f32; 3]],
+    },
 }
 
 fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfError> {
@@ -54,7 +63,14 @@ fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfE
     let l = net.latent_dim;
     let z0: Vec<f32> = net.mean_latent().iter().map(|v| *v as f32).collect();
     let z = Var::from_tensor(&Tensor::from_vec(z0, (1, l), &dev)?)?;
-    let mut opt = AdamW::new(vec![z.clone()], ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
+    let mut opt = AdamW::new(
+        vec![z.clone()],
+        ParamsAdamW {
+            lr: cfg.lr,
+            weight_decay: 0.0,
+            ..Default::default()
+        },
+    )?;
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 11);
     let (n_all, n_surface) = match &target {
         Target::Samples(s) => (s.points.len(), s.points.len()),
@@ -63,14 +79,25 @@ fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfE
     let point = |i: usize| -> [f32; 3] {
         match &target {
             Target::Samples(s) => s.points[i],
-            Target::Surface { surface, free } => if i < surface.len() { surface[i] } else { free[i - surface.len()] },
+            Target::Surface { surface, free } => {
+                if i < surface.len() {
+                    surface[i]
+                } else {
+                    free[i - surface.len()]
+                }
+            }
         }
     };
     let mut last = f64::NAN;
     for step in 0..cfg.steps {
-        let decay = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / cfg.steps as f64).cos());
+        let decay = 0.05
+            + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / cfg.steps as f64).cos());
         opt.set_learning_rate(cfg.lr * decay);
-        let pick: Vec<usize> = if n_all <= cfg.batch { (0..n_all).collect() } else { (0..cfg.batch).map(|_| rng.random_range(0..n_all)).collect() };
+        let pick: Vec<usize> = if n_all <= cfg.batch {
+            (0..n_all).collect()
+        } else {
+            (0..cfg.batch).map(|_| rng.random_range(0..n_all)).collect()
+        };
         let pts: Vec<f32> = pick.iter().flat_map(|&i| point(i)).collect();
         let m = pick.len();
         let p = Tensor::from_vec(pts, (m, 3), &dev)?;
@@ -78,47 +105,90 @@ fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfE
         let f = net::forward(&layers, &x)?;
         let data = match &target {
             Target::Samples(s) => {
-                let t: Vec<f32> = pick.iter().map(|&i| s.sdf[i].clamp(-net::CLAMP as f32, net::CLAMP as f32)).collect();
-                (f.clamp(-net::CLAMP as f32, net::CLAMP as f32)? - Tensor::from_vec(t, m, &dev)?)?.abs()?.mean_all()?
+                let t: Vec<f32> = pick
+                    .iter()
+                    .map(|&i| s.sdf[i].clamp(-net::CLAMP as f32, net::CLAMP as f32))
+                    .collect();
+                (f.clamp(-net::CLAMP as f32, net::CLAMP as f32)? - Tensor::from_vec(t, m, &dev)?)?
+                    .abs()?
+                    .mean_all()?
             }
             Target::Surface { .. } => {
                 // Surface points: |f|; free-space points: max(0, −f).
-                let is_surface: Vec<f32> = pick.iter().map(|&i| if i < n_surface { 1.0 } else { 0.0 }).collect();
+                let is_surface: Vec<f32> = pick
+                    .iter()
+                    .map(|&i| if i < n_surface { 1.0 } else { 0.0 })
+                    .collect();
                 let s = Tensor::from_vec(is_surface, m, &dev)?;
                 let surf = (f.abs()? * &s)?;
                 let free = (f.neg()?.relu()? * s.affine(-1.0, 1.0)?)?;
                 (surf + free)?.mean_all()?
             }
         };
-        let loss = (&data + z.as_tensor().sqr()?.sum_all()?.affine(cfg.latent_reg, 0.0)?)?;
+        let loss = (&data
+            + z.as_tensor()
+                .sqr()?
+                .sum_all()?
+                .affine(cfg.latent_reg, 0.0)?)?;
         opt.backward_step(&loss)?;
         last = f64::from(data.to_scalar::<f32>()?);
         if !last.is_finite() {
-            return Err(SdfError::Invalid(format!("latent inference diverged at step {step}")));
+            return Err(SdfError::Invalid(format!(
+                "latent inference diverged at step {step}"
+            )));
         }
     }
-    let latent = z.as_tensor().flatten_all()?.to_vec1::<f32>()?.into_iter().map(f64::from).collect();
+    let latent = z
+        .as_tensor()
+        .flatten_all()?
+        .to_vec1::<f32>()?
+        .into_iter()
+        .map(f64::from)
+        .collect();
     Ok(Inferred { latent, loss: last })
 }
 
 /// Infers a latent from SDF samples (normalised frame).
-pub fn from_samples(net: &SdfNet, samples: &SdfSamples, cfg: &InferConfig) -> Result<Inferred, SdfError> {
+pub fn from_samples(
+    net: &SdfNet,
+    samples: &SdfSamples,
+    cfg: &InferConfig,
+) -> Result<Inferred, SdfError> {
     if samples.points.is_empty() || samples.points.len() != samples.sdf.len() {
-        return Err(SdfError::Invalid("latent inference needs a non-empty, consistent sample set".into()));
+        return Err(SdfError::Invalid(
+            "latent inference needs a non-empty, consistent sample set".into(),
+        ));
     }
-    if samples.points.iter().flatten().chain(&samples.sdf).any(|v| !v.is_finite()) {
-        return Err(SdfError::Invalid("latent inference: a sample is not finite".into()));
+    if samples
+        .points
+        .iter()
+        .flatten()
+        .chain(&samples.sdf)
+        .any(|v| !v.is_finite())
+    {
+        return Err(SdfError::Invalid(
+            "latent inference: a sample is not finite".into(),
+        ));
     }
     run(net, Target::Samples(samples), cfg)
 }
 
 /// Infers a latent from surface points and points known to lie outside (normalised frame).
-pub fn from_surface(net: &SdfNet, surface: &[[f32; 3]], free: &[[f32; 3]], cfg: &InferConfig) -> Result<Inferred, SdfError> {
+pub fn from_surface(
+    net: &SdfNet,
+    surface: &[[f32; 3]],
+    free: &[[f32; 3]],
+    cfg: &InferConfig,
+) -> Result<Inferred, SdfError> {
     if surface.is_empty() {
-        return Err(SdfError::Invalid("latent inference needs surface points".into()));
+        return Err(SdfError::Invalid(
+            "latent inference needs surface points".into(),
+        ));
     }
     if surface.iter().chain(free).flatten().any(|v| !v.is_finite()) {
-        return Err(SdfError::Invalid("latent inference: a point is not finite".into()));
+        return Err(SdfError::Invalid(
+            "latent inference: a point is not finite".into(),
+        ));
     }
     run(net, Target::Surface { surface, free }, cfg)
 }

@@ -16,13 +16,13 @@
 //! handle), the surface inside the unit sphere. Candle stays inside `net`, `train` and `infer`.
 
 pub mod families;
+pub mod infer;
 pub mod mesh_io;
 pub mod mesh_sdf;
 pub mod net;
-pub mod train;
-pub mod infer;
-pub mod quality;
 pub mod placed;
+pub mod quality;
+pub mod train;
 
 pub use families::{Category, FamilyShape};
 pub use mesh_sdf::{MeshSdf, SdfSamples};

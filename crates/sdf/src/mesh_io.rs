@@ -8,12 +8,18 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 fn bad(path: &Path, reason: impl Into<String>) -> SdfError {
-    SdfError::Mesh { path: path.display().to_string(), reason: reason.into() }
+    SdfError::Mesh {
+        path: path.display().to_string(),
+        reason: reason.into(),
+    }
 }
 
 /// Reads an OBJ, PLY or STL mesh and checks it is usable (finite, non-empty).
 pub fn read_mesh(path: &Path) -> Result<TriMesh, SdfError> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     let mesh = match ext.as_deref() {
         Some("stl") => read_stl(path)?,
         Some("obj" | "ply") => TriMesh::read(path).map_err(|e| bad(path, e.to_string()))?,
@@ -28,10 +34,20 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh, SdfError> {
 
 /// Every `.obj`, `.ply` and `.stl` file in `dir` (not recursive), sorted by name.
 pub fn mesh_files(dir: &Path) -> Result<Vec<PathBuf>, SdfError> {
-    let entries = std::fs::read_dir(dir).map_err(|e| bad(dir, format!("cannot list the directory: {e}")))?;
+    let entries =
+        std::fs::read_dir(dir).map_err(|e| bad(dir, format!("cannot list the directory: {e}")))?;
     let mut files: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && matches!(p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref(), Some("obj" | "ply" | "stl")))
+        .filter(|p| {
+            p.is_file()
+                && matches!(
+                    p.extension()
+                        .and_then(|e| e.to_str())
+                        .map(str::to_ascii_lowercase)
+                        .as_deref(),
+                    Some("obj" | "ply" | "stl")
+                )
+        })
         .collect();
     files.sort();
     if files.is_empty() {
@@ -44,7 +60,10 @@ fn read_stl(path: &Path) -> Result<TriMesh, SdfError> {
     let bytes = std::fs::read(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
     let binary_len = |n: usize| 84 + 50 * n;
     let mut corners: Vec<[f32; 3]> = Vec::new();
-    if bytes.len() >= 84 && binary_len(u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize) == bytes.len() {
+    if bytes.len() >= 84
+        && binary_len(u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize)
+            == bytes.len()
+    {
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
         for t in 0..n {
             let base = 84 + 50 * t + 12;
@@ -57,14 +76,21 @@ fn read_stl(path: &Path) -> Result<TriMesh, SdfError> {
             }
         }
     } else {
-        let text = std::str::from_utf8(&bytes).map_err(|_| bad(path, "neither a binary STL (size mismatch) nor ASCII text"))?;
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|_| bad(path, "neither a binary STL (size mismatch) nor ASCII text"))?;
         if !text.trim_start().starts_with("solid") {
-            return Err(bad(path, "neither a binary STL (size mismatch) nor an ASCII STL (no `solid`)"));
+            return Err(bad(
+                path,
+                "neither a binary STL (size mismatch) nor an ASCII STL (no `solid`)",
+            ));
         }
         for line in text.lines() {
             let mut it = line.split_whitespace();
             if it.next() == Some("vertex") {
-                let v: Vec<f32> = it.map(|s| s.parse::<f32>()).collect::<Result<_, _>>().map_err(|e| bad(path, format!("bad vertex line `{line}`: {e}")))?;
+                let v: Vec<f32> = it
+                    .map(|s| s.parse::<f32>())
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| bad(path, format!("bad vertex line `{line}`: {e}")))?;
                 if v.len() != 3 {
                     return Err(bad(path, format!("bad vertex line `{line}`")));
                 }
@@ -89,16 +115,29 @@ fn read_stl(path: &Path) -> Result<TriMesh, SdfError> {
         });
         triangles.push(t);
     }
-    Ok(TriMesh { vertices, triangles })
+    Ok(TriMesh {
+        vertices,
+        triangles,
+    })
 }
 
 /// Centres the bounding box on the origin and scales its half-diagonal to
 /// [`NORMALISED_RADIUS`] (the families' normalisation).
 pub fn normalise(mesh: &mut TriMesh) {
-    let Some((lo, hi)) = mesh.bounds() else { return };
+    let Some((lo, hi)) = mesh.bounds() else {
+        return;
+    };
     let c = [0, 1, 2].map(|k| 0.5 * (f64::from(lo[k]) + f64::from(hi[k])));
-    let half = (0..3).map(|k| (f64::from(hi[k]) - f64::from(lo[k])).powi(2)).sum::<f64>().sqrt() / 2.0;
-    let s = if half > 0.0 { NORMALISED_RADIUS / half } else { 1.0 };
+    let half = (0..3)
+        .map(|k| (f64::from(hi[k]) - f64::from(lo[k])).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / 2.0;
+    let s = if half > 0.0 {
+        NORMALISED_RADIUS / half
+    } else {
+        1.0
+    };
     mesh.map_vertices(|v| [0, 1, 2].map(|k| ((f64::from(v[k]) - c[k]) * s) as f32));
 }
 

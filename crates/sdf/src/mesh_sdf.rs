@@ -53,9 +53,18 @@ pub struct SdfSamples {
 impl MeshSdf {
     /// Builds the hierarchy.
     pub fn new(mesh: &TriMesh) -> Self {
-        let vertices: Vec<Vector3<f64>> = mesh.vertices.iter().map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))).collect();
+        let vertices: Vec<Vector3<f64>> = mesh
+            .vertices
+            .iter()
+            .map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])))
+            .collect();
         let triangles = mesh.triangles.clone();
-        let centroids: Vec<Vector3<f64>> = triangles.iter().map(|t| (vertices[t[0] as usize] + vertices[t[1] as usize] + vertices[t[2] as usize]) / 3.0).collect();
+        let centroids: Vec<Vector3<f64>> = triangles
+            .iter()
+            .map(|t| {
+                (vertices[t[0] as usize] + vertices[t[1] as usize] + vertices[t[2] as usize]) / 3.0
+            })
+            .collect();
         let mut area_cdf = Vec::with_capacity(triangles.len());
         let mut acc = 0.0;
         for t in &triangles {
@@ -63,7 +72,13 @@ impl MeshSdf {
             acc += 0.5 * (b - a).cross(&(c - a)).norm();
             area_cdf.push(acc);
         }
-        let mut s = Self { vertices, triangles, nodes: Vec::new(), order: (0..mesh.triangles.len() as u32).collect(), area_cdf };
+        let mut s = Self {
+            vertices,
+            triangles,
+            nodes: Vec::new(),
+            order: (0..mesh.triangles.len() as u32).collect(),
+            area_cdf,
+        };
         if !s.triangles.is_empty() {
             s.build(0, s.triangles.len(), &centroids);
         }
@@ -89,15 +104,34 @@ impl MeshSdf {
             weighted += centroids[t as usize] * a.norm();
             total += a.norm();
         }
-        let centre = if total > 0.0 { weighted / total } else { (lo + hi) / 2.0 };
-        let radius = self.order[start..end].iter().flat_map(|&t| self.tri(t)).map(|p| (p - centre).norm()).fold(0.0, f64::max);
-        self.nodes.push(Node { lo, hi, first: start as u32, count: (end - start) as u32, right: 0, area, centre, radius });
+        let centre = if total > 0.0 {
+            weighted / total
+        } else {
+            (lo + hi) / 2.0
+        };
+        let radius = self.order[start..end]
+            .iter()
+            .flat_map(|&t| self.tri(t))
+            .map(|p| (p - centre).norm())
+            .fold(0.0, f64::max);
+        self.nodes.push(Node {
+            lo,
+            hi,
+            first: start as u32,
+            count: (end - start) as u32,
+            right: 0,
+            area,
+            centre,
+            radius,
+        });
         if end - start <= LEAF {
             return id;
         }
         let axis = (hi - lo).imax();
         let mid = (start + end) / 2;
-        self.order[start..end].select_nth_unstable_by(mid - start, |a, b| centroids[*a as usize][axis].total_cmp(&centroids[*b as usize][axis]));
+        self.order[start..end].select_nth_unstable_by(mid - start, |a, b| {
+            centroids[*a as usize][axis].total_cmp(&centroids[*b as usize][axis])
+        });
         let left = self.build(start, mid, centroids);
         let right = self.build(mid, end, centroids);
         let n = &mut self.nodes[id as usize];
@@ -132,7 +166,10 @@ impl MeshSdf {
                 }
             } else {
                 let (a, b) = (n.first, n.right);
-                let (da, db) = (Self::box_distance2(&self.nodes[a as usize], p), Self::box_distance2(&self.nodes[b as usize], p));
+                let (da, db) = (
+                    Self::box_distance2(&self.nodes[a as usize], p),
+                    Self::box_distance2(&self.nodes[b as usize], p),
+                );
                 // Nearer child last, so it is popped first.
                 let (near, far) = if da <= db { (a, b) } else { (b, a) };
                 stack[top] = far;
@@ -181,7 +218,10 @@ impl MeshSdf {
     pub fn surface_point(&self, rng: &mut impl Rng) -> Vector3<f64> {
         let total = *self.area_cdf.last().unwrap_or(&0.0);
         let x = rng.random::<f64>() * total;
-        let t = self.area_cdf.partition_point(|&c| c < x).min(self.triangles.len().saturating_sub(1));
+        let t = self
+            .area_cdf
+            .partition_point(|&c| c < x)
+            .min(self.triangles.len().saturating_sub(1));
         let [a, b, c] = self.tri(t as u32);
         let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
         if u + v > 1.0 {
@@ -208,8 +248,17 @@ impl MeshSdf {
         while points.len() < n {
             points.push(Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0)));
         }
-        let sdf: Vec<f32> = points.par_iter().map(|p| self.signed_distance(p) as f32).collect();
-        SdfSamples { points: points.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect(), sdf }
+        let sdf: Vec<f32> = points
+            .par_iter()
+            .map(|p| self.signed_distance(p) as f32)
+            .collect();
+        SdfSamples {
+            points: points
+                .iter()
+                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect(),
+            sdf,
+        }
     }
 }
 
@@ -229,18 +278,42 @@ mod tests {
 
     #[test]
     fn sphere_mesh_signed_distance_and_winding() {
-        let m = irmirror_geom::isosurface::isosurface(|p| p.norm() - 0.6, Vector3::repeat(-1.0), Vector3::repeat(1.0), 40);
+        let m = irmirror_geom::isosurface::isosurface(
+            |p| p.norm() - 0.6,
+            Vector3::repeat(-1.0),
+            Vector3::repeat(1.0),
+            40,
+        );
         let s = MeshSdf::new(&m);
-        for p in [Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.3, -0.2, 0.1), Vector3::new(0.9, 0.1, 0.0), Vector3::new(-0.5, 0.6, 0.7)] {
+        for p in [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(0.3, -0.2, 0.1),
+            Vector3::new(0.9, 0.1, 0.0),
+            Vector3::new(-0.5, 0.6, 0.7),
+        ] {
             let exact = p.norm() - 0.6;
-            assert!((s.signed_distance(&p) - exact).abs() < 0.01, "{p:?}: {} vs {exact}", s.signed_distance(&p));
+            assert!(
+                (s.signed_distance(&p) - exact).abs() < 0.01,
+                "{p:?}: {} vs {exact}",
+                s.signed_distance(&p)
+            );
             let w = s.winding_number(&p);
-            assert!((w - if exact < 0.0 { 1.0 } else { 0.0 }).abs() < 0.02, "winding {w}");
+            assert!(
+                (w - if exact < 0.0 { 1.0 } else { 0.0 }).abs() < 0.02,
+                "winding {w}"
+            );
         }
         // The hierarchical winding number matches the exact sum over all triangles (dipole
         // terms are first order: ~1 % near the surface, far from the ½ decision).
         let p = Vector3::new(0.2, 0.55, -0.1);
-        let exact: f64 = (0..m.triangles.len() as u32).map(|t| solid_angle(&s.tri(t), &p)).sum::<f64>() / (4.0 * std::f64::consts::PI);
-        assert!((exact - s.winding_number(&p)).abs() < 1e-2, "{exact} vs {}", s.winding_number(&p));
+        let exact: f64 = (0..m.triangles.len() as u32)
+            .map(|t| solid_angle(&s.tri(t), &p))
+            .sum::<f64>()
+            / (4.0 * std::f64::consts::PI);
+        assert!(
+            (exact - s.winding_number(&p)).abs() < 1e-2,
+            "{exact} vs {}",
+            s.winding_number(&p)
+        );
     }
 }

@@ -62,21 +62,39 @@ fn layer_shapes(l: usize, w: usize) -> [(usize, usize); LAYERS] {
 
 impl SdfNet {
     /// A network from per-layer `(weights, biases)` in f32 (candle's training output).
-    pub fn from_parts(category: Category, latent_dim: usize, width: usize, layers: Vec<(Vec<f32>, Vec<f32>)>, latents: Vec<Vec<f32>>, metadata: BTreeMap<String, String>) -> Result<Self, SdfError> {
+    pub fn from_parts(
+        category: Category,
+        latent_dim: usize,
+        width: usize,
+        layers: Vec<(Vec<f32>, Vec<f32>)>,
+        latents: Vec<Vec<f32>>,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<Self, SdfError> {
         let shapes = layer_shapes(latent_dim, width);
         if layers.len() != LAYERS {
-            return Err(SdfError::Invalid(format!("{} layers, expected {LAYERS}", layers.len())));
+            return Err(SdfError::Invalid(format!(
+                "{} layers, expected {LAYERS}",
+                layers.len()
+            )));
         }
         for (k, ((w, b), (o, i))) in layers.iter().zip(shapes).enumerate() {
             if w.len() != o * i || b.len() != o {
-                return Err(SdfError::Invalid(format!("layer {k}: {} weights / {} biases, expected {o}×{i} / {o}", w.len(), b.len())));
+                return Err(SdfError::Invalid(format!(
+                    "layer {k}: {} weights / {} biases, expected {o}×{i} / {o}",
+                    w.len(),
+                    b.len()
+                )));
             }
         }
         if width == 0 || width > 512 || latent_dim == 0 || latent_dim > 64 {
-            return Err(SdfError::Invalid(format!("width {width} / latent {latent_dim} outside 1…512 / 1…64")));
+            return Err(SdfError::Invalid(format!(
+                "width {width} / latent {latent_dim} outside 1…512 / 1…64"
+            )));
         }
         if latents.iter().any(|z| z.len() != latent_dim) {
-            return Err(SdfError::Invalid("a training latent has the wrong length".into()));
+            return Err(SdfError::Invalid(
+                "a training latent has the wrong length".into(),
+            ));
         }
         let widen = |v: &Vec<f32>| v.iter().map(|x| f64::from(*x)).collect::<Vec<f64>>();
         Ok(Self {
@@ -92,43 +110,85 @@ impl SdfNet {
     /// The shipped prior of `category` (`assets/object_priors`, built into the binary), parsed
     /// once per process.
     pub fn builtin(category: Category) -> Result<Arc<SdfNet>, SdfError> {
-        static CACHE: std::sync::OnceLock<[Result<Arc<SdfNet>, String>; 3]> = std::sync::OnceLock::new();
+        static CACHE: std::sync::OnceLock<[Result<Arc<SdfNet>, String>; 3]> =
+            std::sync::OnceLock::new();
         let cache = CACHE.get_or_init(|| {
-            let parse = |b: &[u8]| SdfNet::from_bytes(b).map(Arc::new).map_err(|e| e.to_string());
+            let parse = |b: &[u8]| {
+                SdfNet::from_bytes(b)
+                    .map(Arc::new)
+                    .map_err(|e| e.to_string())
+            };
             [
-                parse(include_bytes!("../../../assets/object_priors/bowl.safetensors")),
-                parse(include_bytes!("../../../assets/object_priors/mug.safetensors")),
-                parse(include_bytes!("../../../assets/object_priors/car.safetensors")),
+                parse(include_bytes!(
+                    "../../../assets/object_priors/bowl.safetensors"
+                )),
+                parse(include_bytes!(
+                    "../../../assets/object_priors/mug.safetensors"
+                )),
+                parse(include_bytes!(
+                    "../../../assets/object_priors/car.safetensors"
+                )),
             ]
         });
-        let k = Category::ALL.iter().position(|c| *c == category).expect("every category has a prior");
-        cache[k].clone().map_err(|reason| SdfError::Weights { path: format!("built-in {} prior", category.name()), reason })
+        let k = Category::ALL
+            .iter()
+            .position(|c| *c == category)
+            .expect("every category has a prior");
+        cache[k].clone().map_err(|reason| SdfError::Weights {
+            path: format!("built-in {} prior", category.name()),
+            reason,
+        })
     }
 
     /// Loads a prior, checking every tensor's shape.
     pub fn load(path: &Path) -> Result<Self, SdfError> {
-        let bytes = std::fs::read(path).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: format!("cannot read: {e}") })?;
-        Self::from_bytes(&bytes).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: e.to_string() })
+        let bytes = std::fs::read(path).map_err(|e| SdfError::Weights {
+            path: path.display().to_string(),
+            reason: format!("cannot read: {e}"),
+        })?;
+        Self::from_bytes(&bytes).map_err(|e| SdfError::Weights {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
     }
 
     /// Parses a prior from safetensors bytes.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, SdfError> {
         let bad = |r: String| SdfError::Invalid(r);
-        let st = safetensors::SafeTensors::deserialize(bytes).map_err(|e| bad(format!("not a safetensors file: {e}")))?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
-        let metadata: BTreeMap<String, String> = meta.metadata().clone().unwrap_or_default().into_iter().collect();
-        let category = Category::parse(metadata.get("category").map(String::as_str).unwrap_or("")).map_err(|_| bad("metadata has no known `category`".into()))?;
+        let st = safetensors::SafeTensors::deserialize(bytes)
+            .map_err(|e| bad(format!("not a safetensors file: {e}")))?;
+        let (_, meta) =
+            safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
+        let metadata: BTreeMap<String, String> = meta
+            .metadata()
+            .clone()
+            .unwrap_or_default()
+            .into_iter()
+            .collect();
+        let category = Category::parse(metadata.get("category").map(String::as_str).unwrap_or(""))
+            .map_err(|_| bad("metadata has no known `category`".into()))?;
         let get = |name: &str| -> Result<(Vec<usize>, Vec<f32>), SdfError> {
-            let t = st.tensor(name).map_err(|_| bad(format!("missing tensor `{name}`")))?;
+            let t = st
+                .tensor(name)
+                .map_err(|_| bad(format!("missing tensor `{name}`")))?;
             if t.dtype() != safetensors::Dtype::F32 {
-                return Err(bad(format!("tensor `{name}` is {:?}, expected F32", t.dtype())));
+                return Err(bad(format!(
+                    "tensor `{name}` is {:?}, expected F32",
+                    t.dtype()
+                )));
             }
-            let v = t.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+            let v = t
+                .data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
             Ok((t.shape().to_vec(), v))
         };
         let (s0, _) = get("l0.weight")?;
         if s0.len() != 2 || s0[1] < 4 {
-            return Err(bad(format!("tensor `l0.weight` has shape {s0:?}, expected [W, L+3]")));
+            return Err(bad(format!(
+                "tensor `l0.weight` has shape {s0:?}, expected [W, L+3]"
+            )));
         }
         let (width, latent_dim) = (s0[0], s0[1] - 3);
         let mut layers = Vec::new();
@@ -136,13 +196,17 @@ impl SdfNet {
             let (sw, w) = get(&format!("l{k}.weight"))?;
             let (sb, b) = get(&format!("l{k}.bias"))?;
             if sw != [o, i] || sb != [o] {
-                return Err(bad(format!("layer l{k} has shapes {sw:?}/{sb:?}, expected [{o}, {i}]/[{o}]")));
+                return Err(bad(format!(
+                    "layer l{k} has shapes {sw:?}/{sb:?}, expected [{o}, {i}]/[{o}]"
+                )));
             }
             layers.push((w, b));
         }
         let (sl, lat) = get("latents")?;
         if sl.len() != 2 || sl[1] != latent_dim {
-            return Err(bad(format!("tensor `latents` has shape {sl:?}, expected [N, {latent_dim}]")));
+            return Err(bad(format!(
+                "tensor `latents` has shape {sl:?}, expected [N, {latent_dim}]"
+            )));
         }
         let latents = lat.chunks(latent_dim).map(<[f32]>::to_vec).collect();
         Self::from_parts(category, latent_dim, width, layers, latents, metadata)
@@ -150,24 +214,48 @@ impl SdfNet {
 
     /// Writes the prior (f32 safetensors with metadata; `category` is added).
     pub fn save(&self, path: &Path) -> Result<(), SdfError> {
-        let narrow = |v: &[f64]| v.iter().flat_map(|x| (*x as f32).to_le_bytes()).collect::<Vec<u8>>();
+        let narrow = |v: &[f64]| {
+            v.iter()
+                .flat_map(|x| (*x as f32).to_le_bytes())
+                .collect::<Vec<u8>>()
+        };
         let mut bufs: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
-        for (k, ((w, b), (o, i))) in self.weights.iter().zip(layer_shapes(self.latent_dim, self.width)).enumerate() {
+        for (k, ((w, b), (o, i))) in self
+            .weights
+            .iter()
+            .zip(layer_shapes(self.latent_dim, self.width))
+            .enumerate()
+        {
             bufs.push((format!("l{k}.weight"), vec![o, i], narrow(w)));
             bufs.push((format!("l{k}.bias"), vec![o], narrow(b)));
         }
         let flat: Vec<f64> = self.train_latents.iter().flatten().copied().collect();
-        bufs.push(("latents".into(), vec![self.train_latents.len(), self.latent_dim], narrow(&flat)));
+        bufs.push((
+            "latents".into(),
+            vec![self.train_latents.len(), self.latent_dim],
+            narrow(&flat),
+        ));
         let views: Vec<(String, safetensors::tensor::TensorView)> = bufs
             .iter()
-            .map(|(n, s, d)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), d)?)))
+            .map(|(n, s, d)| {
+                Ok((
+                    n.clone(),
+                    safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), d)?,
+                ))
+            })
             .collect::<Result<_, safetensors::SafeTensorError>>()
             .map_err(|e| SdfError::Invalid(e.to_string()))?;
         let mut meta: HashMap<String, String> = self.metadata.clone().into_iter().collect();
         meta.insert("category".into(), self.category.name().into());
-        let bytes = safetensors::serialize(views, Some(meta)).map_err(|e| SdfError::Invalid(e.to_string()))?;
+        let bytes = safetensors::serialize(views, Some(meta))
+            .map_err(|e| SdfError::Invalid(e.to_string()))?;
         let tmp = path.with_extension("safetensors.partial");
-        std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| SdfError::Weights { path: path.display().to_string(), reason: format!("cannot write: {e}") })
+        std::fs::write(&tmp, bytes)
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .map_err(|e| SdfError::Weights {
+                path: path.display().to_string(),
+                reason: format!("cannot write: {e}"),
+            })
     }
 
     /// The weights as candle tensors (f32, `[fan_out, fan_in]` and `[fan_out]`).
@@ -178,7 +266,10 @@ impl SdfNet {
             .map(|((o, i), (w, b))| {
                 let w32: Vec<f32> = w.iter().map(|x| *x as f32).collect();
                 let b32: Vec<f32> = b.iter().map(|x| *x as f32).collect();
-                Ok((Tensor::from_vec(w32, (*o, *i), device)?, Tensor::from_vec(b32, *o, device)?))
+                Ok((
+                    Tensor::from_vec(w32, (*o, *i), device)?,
+                    Tensor::from_vec(b32, *o, device)?,
+                ))
             })
             .collect()
     }
@@ -186,17 +277,39 @@ impl SdfNet {
     /// `f(z, p)` for many points at once (candle, f32, chunks of 32k points).
     pub fn eval_batch(&self, z: &[f64], points: &[Vector3<f64>]) -> Result<Vec<f64>, SdfError> {
         if z.len() != self.latent_dim {
-            return Err(SdfError::Invalid(format!("latent of length {}, expected {}", z.len(), self.latent_dim)));
+            return Err(SdfError::Invalid(format!(
+                "latent of length {}, expected {}",
+                z.len(),
+                self.latent_dim
+            )));
         }
         let dev = Device::Cpu;
         let layers = self.tensors(&dev)?;
-        let zt = Tensor::from_vec(z.iter().map(|v| *v as f32).collect::<Vec<f32>>(), (1, self.latent_dim), &dev)?;
+        let zt = Tensor::from_vec(
+            z.iter().map(|v| *v as f32).collect::<Vec<f32>>(),
+            (1, self.latent_dim),
+            &dev,
+        )?;
         let mut out = Vec::with_capacity(points.len());
         for chunk in points.chunks(32_768) {
             let m = chunk.len();
-            let p: Vec<f32> = chunk.iter().flat_map(|q| [q.x as f32, q.y as f32, q.z as f32]).collect();
-            let x = Tensor::cat(&[&zt.broadcast_as((m, self.latent_dim))?, &Tensor::from_vec(p, (m, 3), &dev)?], 1)?;
-            out.extend(forward(&layers, &x)?.to_vec1::<f32>()?.into_iter().map(f64::from));
+            let p: Vec<f32> = chunk
+                .iter()
+                .flat_map(|q| [q.x as f32, q.y as f32, q.z as f32])
+                .collect();
+            let x = Tensor::cat(
+                &[
+                    &zt.broadcast_as((m, self.latent_dim))?,
+                    &Tensor::from_vec(p, (m, 3), &dev)?,
+                ],
+                1,
+            )?;
+            out.extend(
+                forward(&layers, &x)?
+                    .to_vec1::<f32>()?
+                    .into_iter()
+                    .map(f64::from),
+            );
         }
         Ok(out)
     }
@@ -204,7 +317,9 @@ impl SdfNet {
     /// Mean of the training latents (the starting point of latent inference).
     pub fn mean_latent(&self) -> Vec<f64> {
         let n = self.train_latents.len().max(1) as f64;
-        (0..self.latent_dim).map(|k| self.train_latents.iter().map(|z| z[k]).sum::<f64>() / n).collect()
+        (0..self.latent_dim)
+            .map(|k| self.train_latents.iter().map(|z| z[k]).sum::<f64>() / n)
+            .collect()
     }
 
     /// `f(z, p)` with `(∂f/∂z, ∂f/∂p)`, f64 (reference path; [`LatentSdf`] is the fast one).
@@ -215,7 +330,16 @@ impl SdfNet {
         let lin = |k: usize, input: &[f64]| -> Vec<f64> {
             let (wt, b) = &self.weights[k];
             let n_in = input.len();
-            b.iter().enumerate().map(|(o, bo)| bo + wt[o * n_in..(o + 1) * n_in].iter().zip(input).map(|(a, c)| a * c).sum::<f64>()).collect()
+            b.iter()
+                .enumerate()
+                .map(|(o, bo)| {
+                    bo + wt[o * n_in..(o + 1) * n_in]
+                        .iter()
+                        .zip(input)
+                        .map(|(a, c)| a * c)
+                        .sum::<f64>()
+                })
+                .collect()
         };
         let act = |a: &[f64]| -> (Vec<f64>, Vec<f64>) { a.iter().map(|v| silu(*v)).unzip() };
         let (h0, d0) = act(&lin(0, &x));
@@ -236,13 +360,34 @@ impl SdfNet {
             }
             out
         };
-        let g3: Vec<f64> = self.weights[4].0.iter().zip(&d3).map(|(a, b)| a * b).collect();
-        let g2: Vec<f64> = back(3, &g3, w).iter().zip(&d2).map(|(a, b)| a * b).collect();
+        let g3: Vec<f64> = self.weights[4]
+            .0
+            .iter()
+            .zip(&d3)
+            .map(|(a, b)| a * b)
+            .collect();
+        let g2: Vec<f64> = back(3, &g3, w)
+            .iter()
+            .zip(&d2)
+            .map(|(a, b)| a * b)
+            .collect();
         let gin2 = back(2, &g2, w + l + 3);
         let g1: Vec<f64> = gin2[..w].iter().zip(&d1).map(|(a, b)| a * b).collect();
-        let g0: Vec<f64> = back(1, &g1, w).iter().zip(&d0).map(|(a, b)| a * b).collect();
-        let gx: Vec<f64> = back(0, &g0, l + 3).iter().zip(&gin2[w..]).map(|(a, b)| a + b).collect();
-        (f, gx[..l].to_vec(), Vector3::new(gx[l], gx[l + 1], gx[l + 2]))
+        let g0: Vec<f64> = back(1, &g1, w)
+            .iter()
+            .zip(&d0)
+            .map(|(a, b)| a * b)
+            .collect();
+        let gx: Vec<f64> = back(0, &g0, l + 3)
+            .iter()
+            .zip(&gin2[w..])
+            .map(|(a, b)| a + b)
+            .collect();
+        (
+            f,
+            gx[..l].to_vec(),
+            Vector3::new(gx[l], gx[l + 1], gx[l + 2]),
+        )
     }
 
     /// The shape of latent `z` as a field the renderer can trace.
@@ -267,15 +412,30 @@ impl LatentSdf {
     pub fn new(net: Arc<SdfNet>, z: &[f64]) -> Result<Self, SdfError> {
         let (l, w) = (net.latent_dim, net.width);
         if z.len() != l || z.iter().any(|v| !v.is_finite()) {
-            return Err(SdfError::Invalid(format!("latent of length {} (finite: {}), expected {l} finite values", z.len(), z.iter().all(|v| v.is_finite()))));
+            return Err(SdfError::Invalid(format!(
+                "latent of length {} (finite: {}), expected {l} finite values",
+                z.len(),
+                z.iter().all(|v| v.is_finite())
+            )));
         }
         let fold = |k: usize, n_in: usize, offset: usize| -> Vec<f64> {
             let (wt, b) = &net.weights[k];
-            (0..w).map(|o| b[o] + (0..l).map(|i| wt[o * n_in + offset + i] * z[i]).sum::<f64>()).collect()
+            (0..w)
+                .map(|o| {
+                    b[o] + (0..l)
+                        .map(|i| wt[o * n_in + offset + i] * z[i])
+                        .sum::<f64>()
+                })
+                .collect()
         };
         let bias0 = fold(0, l + 3, 0);
         let bias2 = fold(2, w + l + 3, w);
-        Ok(Self { net, latent: z.to_vec(), bias0, bias2 })
+        Ok(Self {
+            net,
+            latent: z.to_vec(),
+            bias0,
+            bias2,
+        })
     }
 
     /// Signed distance and its gradient with respect to the point (normalised frame).
@@ -289,16 +449,36 @@ impl LatentSdf {
             let r = &wts[k].0[o * n_in + n_in - 3..(o + 1) * n_in];
             Vector3::new(r[0], r[1], r[2])
         };
-        let (mut h0, mut d0, mut h1, mut d1) = ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
-        let (mut h2, mut d2, mut h3, mut d3) = ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
+        let (mut h0, mut d0, mut h1, mut d1) =
+            ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
+        let (mut h2, mut d2, mut h3, mut d3) =
+            ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
         for o in 0..w {
             (h0[o], d0[o]) = silu(self.bias0[o] + p_cols(0, n0, o).dot(p));
         }
-        dense_silu(&wts[1].0, w, &wts[1].1, &h0[..w], &mut h1[..w], &mut d1[..w]);
+        dense_silu(
+            &wts[1].0,
+            w,
+            &wts[1].1,
+            &h0[..w],
+            &mut h1[..w],
+            &mut d1[..w],
+        );
         for o in 0..w {
-            (h2[o], d2[o]) = silu(self.bias2[o] + dot(&wts[2].0[o * n2..o * n2 + w], &h1[..w]) + p_cols(2, n2, o).dot(p));
+            (h2[o], d2[o]) = silu(
+                self.bias2[o]
+                    + dot(&wts[2].0[o * n2..o * n2 + w], &h1[..w])
+                    + p_cols(2, n2, o).dot(p),
+            );
         }
-        dense_silu(&wts[3].0, w, &wts[3].1, &h2[..w], &mut h3[..w], &mut d3[..w]);
+        dense_silu(
+            &wts[3].0,
+            w,
+            &wts[3].1,
+            &h2[..w],
+            &mut h3[..w],
+            &mut d3[..w],
+        );
         let f = wts[4].1[0] + dot(&wts[4].0, &h3[..w]);
         // Reverse pass, reusing the activation buffers for gradients of the pre-activations.
         let g3 = &mut h3[..w];

@@ -135,7 +135,14 @@ fn tensor(v: Vec<f64>, shape: &[usize], dtype: DType) -> candle_core::Result<Ten
 
 impl Frame<'_> {
     /// The loss (a scalar tensor) on the given surface, free, inside and support points.
-    fn loss(&self, v: &Vars, surface: &[Vector3<f64>], free: &[Vector3<f64>], inside: &[Vector3<f64>], support: &[Vector3<f64>]) -> candle_core::Result<Tensor> {
+    fn loss(
+        &self,
+        v: &Vars,
+        surface: &[Vector3<f64>],
+        free: &[Vector3<f64>],
+        inside: &[Vector3<f64>],
+        support: &[Vector3<f64>],
+    ) -> candle_core::Result<Tensor> {
         let dt = self.dtype;
         let u = self.obs.unit_m;
         let l = v.z.as_tensor().dim(1)?;
@@ -148,18 +155,35 @@ impl Frame<'_> {
                 (0..9).map(move |i| g[(i / 3, i % 3)])
             })
             .collect();
-        let skew = v.delta.as_tensor().matmul(&tensor(gens, &[3, 9], dt)?)?.reshape((3, 3))?;
-        let r0 = tensor((0..9).map(|i| self.r0[(i / 3, i % 3)]).collect(), &[3, 3], dt)?;
+        let skew = v
+            .delta
+            .as_tensor()
+            .matmul(&tensor(gens, &[3, 9], dt)?)?
+            .reshape((3, 3))?;
+        let r0 = tensor(
+            (0..9).map(|i| self.r0[(i / 3, i % 3)]).collect(),
+            &[3, 3],
+            dt,
+        )?;
         let m = (&r0 + r0.matmul(&skew)?)?;
-        let t = (tensor(self.t0.as_slice().to_vec(), &[1, 3], dt)? + v.tau.as_tensor().affine(u, 0.0)?)?;
+        let t = (tensor(self.t0.as_slice().to_vec(), &[1, 3], dt)?
+            + v.tau.as_tensor().affine(u, 0.0)?)?;
         let s = v.log_s.as_tensor().exp()?.affine(self.s0, 0.0)?; // [1, 1]
         let (n_s, n_f, n_i, n_u) = (surface.len(), free.len(), inside.len(), support.len());
-        let pts: Vec<f64> = surface.iter().chain(free).chain(inside).chain(support).flat_map(|p| [p.x, p.y, p.z]).collect();
+        let pts: Vec<f64> = surface
+            .iter()
+            .chain(free)
+            .chain(inside)
+            .chain(support)
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
         let n = pts.len() / 3;
         let p = tensor(pts, &[n, 3], dt)?;
         let q = p.broadcast_sub(&t)?.matmul(&m)?.broadcast_div(&s)?;
         let x = Tensor::cat(&[&v.z.as_tensor().broadcast_as((n, l))?, &q], 1)?;
-        let d = net::forward(self.net, &x)?.broadcast_mul(&s.squeeze(1)?)?.affine(1.0 / u, 0.0)?;
+        let d = net::forward(self.net, &x)?
+            .broadcast_mul(&s.squeeze(1)?)?
+            .affine(1.0 / u, 0.0)?;
         let h = self.cfg.huber;
         let mut total = {
             let a = d.narrow(0, 0, n_s)?.abs()?;
@@ -175,7 +199,11 @@ impl Frame<'_> {
             total = (total + hinge.affine(self.cfg.w_free, 0.0)?)?;
         }
         if n_u > 0 {
-            let hinge = d.narrow(0, n_s + n_f + n_i, n_u)?.neg()?.relu()?.mean_all()?;
+            let hinge = d
+                .narrow(0, n_s + n_f + n_i, n_u)?
+                .neg()?
+                .relu()?
+                .mean_all()?;
             total = (total + hinge.affine(self.cfg.w_support, 0.0)?)?;
         }
         if let Some(up) = self.obs.up {
@@ -184,10 +212,19 @@ impl Frame<'_> {
             total = (total + dev.sqr()?.sum_all()?.affine(self.cfg.w_up, 0.0)?)?;
         }
         if let Some((mean, sigma)) = self.obs.scale_prior {
-            let z = v.log_s.as_tensor().affine(1.0, self.s0.ln() - mean)?.affine(1.0 / sigma, 0.0)?;
+            let z = v
+                .log_s
+                .as_tensor()
+                .affine(1.0, self.s0.ln() - mean)?
+                .affine(1.0 / sigma, 0.0)?;
             total = (total + z.sqr()?.sum_all()?.affine(1e-3, 0.0)?)?;
         }
-        total + v.z.as_tensor().sqr()?.sum_all()?.affine(self.cfg.latent_reg, 0.0)?
+        total
+            + v.z
+                .as_tensor()
+                .sqr()?
+                .sum_all()?
+                .affine(self.cfg.latent_reg, 0.0)?
     }
 }
 
@@ -205,47 +242,114 @@ fn vars(latent: &[f64], dtype: DType) -> candle_core::Result<Vars> {
     })
 }
 
-fn check(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>, latent: &[f64]) -> Result<(), SdfError> {
+fn check(
+    net: &SdfNet,
+    obs: &PlacedObservation,
+    init: &Similarity3<f64>,
+    latent: &[f64],
+) -> Result<(), SdfError> {
     if obs.surface.is_empty() {
-        return Err(SdfError::Invalid("fitting a placed shape needs surface points".into()));
+        return Err(SdfError::Invalid(
+            "fitting a placed shape needs surface points".into(),
+        ));
     }
-    if obs.surface.iter().chain(obs.free).chain(obs.inside).chain(obs.support).any(|p| !p.iter().all(|v| v.is_finite())) {
-        return Err(SdfError::Invalid("fitting a placed shape: a point is not finite".into()));
+    if obs
+        .surface
+        .iter()
+        .chain(obs.free)
+        .chain(obs.inside)
+        .chain(obs.support)
+        .any(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        return Err(SdfError::Invalid(
+            "fitting a placed shape: a point is not finite".into(),
+        ));
     }
     if !(obs.unit_m > 0.0 && init.scale > 0.0 && init.translation.iter().all(|v| v.is_finite())) {
-        return Err(SdfError::Invalid("fitting a placed shape: the unit and the initial scale must be positive".into()));
+        return Err(SdfError::Invalid(
+            "fitting a placed shape: the unit and the initial scale must be positive".into(),
+        ));
     }
     if latent.len() != net.latent_dim {
-        return Err(SdfError::Invalid(format!("latent of length {}, expected {}", latent.len(), net.latent_dim)));
+        return Err(SdfError::Invalid(format!(
+            "latent of length {}, expected {}",
+            latent.len(),
+            net.latent_dim
+        )));
     }
     Ok(())
 }
 
 /// Fits latent and placement of `net`'s shape to `obs`, from `init` (normalised object frame →
 /// depth frame) and `latent` (e.g. the prior's mean latent).
-pub fn fit_placed(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>, latent: &[f64], cfg: &PlacedFitConfig) -> Result<PlacedFit, SdfError> {
+pub fn fit_placed(
+    net: &SdfNet,
+    obs: &PlacedObservation,
+    init: &Similarity3<f64>,
+    latent: &[f64],
+    cfg: &PlacedFitConfig,
+) -> Result<PlacedFit, SdfError> {
     check(net, obs, init, latent)?;
     let dt = DType::F32;
     let layers = net.tensors(&Device::Cpu)?;
     let v = vars(latent, dt)?;
-    let adam = |var: &Var, lr: f64| AdamW::new(vec![var.clone()], ParamsAdamW { lr, weight_decay: 0.0, ..Default::default() });
-    let mut opts = [(adam(&v.z, cfg.lr_latent)?, cfg.lr_latent, false), (adam(&v.delta, cfg.lr_rotation)?, cfg.lr_rotation, true), (adam(&v.tau, cfg.lr_translation)?, cfg.lr_translation, true), (adam(&v.log_s, cfg.lr_scale)?, cfg.lr_scale, true)];
-    let mut frame = Frame { net: &layers, r0: init.rotation, t0: init.translation, s0: init.scale, obs, cfg, dtype: dt };
+    let adam = |var: &Var, lr: f64| {
+        AdamW::new(
+            vec![var.clone()],
+            ParamsAdamW {
+                lr,
+                weight_decay: 0.0,
+                ..Default::default()
+            },
+        )
+    };
+    let mut opts = [
+        (adam(&v.z, cfg.lr_latent)?, cfg.lr_latent, false),
+        (adam(&v.delta, cfg.lr_rotation)?, cfg.lr_rotation, true),
+        (adam(&v.tau, cfg.lr_translation)?, cfg.lr_translation, true),
+        (adam(&v.log_s, cfg.lr_scale)?, cfg.lr_scale, true),
+    ];
+    let mut frame = Frame {
+        net: &layers,
+        r0: init.rotation,
+        t0: init.translation,
+        s0: init.scale,
+        obs,
+        cfg,
+        dtype: dt,
+    };
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 13);
     let draw = |pts: &[Vector3<f64>], rng: &mut irmirror_geom::rng::Rng| -> Vec<Vector3<f64>> {
-        if pts.len() <= cfg.batch { pts.to_vec() } else { (0..cfg.batch).map(|_| pts[rng.random_range(0..pts.len())]).collect() }
+        if pts.len() <= cfg.batch {
+            pts.to_vec()
+        } else {
+            (0..cfg.batch)
+                .map(|_| pts[rng.random_range(0..pts.len())])
+                .collect()
+        }
     };
     let total = cfg.latent_steps + cfg.steps;
     let mut curve = Vec::with_capacity(total);
     for step in 0..total {
         let joint = step >= cfg.latent_steps;
-        let (k, n) = if joint { (step - cfg.latent_steps, cfg.steps) } else { (step, cfg.latent_steps) };
-        let decay = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * k as f64 / n.max(1) as f64).cos());
-        let (surface, free, inside) = (draw(obs.surface, &mut rng), draw(obs.free, &mut rng), draw(obs.inside, &mut rng));
+        let (k, n) = if joint {
+            (step - cfg.latent_steps, cfg.steps)
+        } else {
+            (step, cfg.latent_steps)
+        };
+        let decay =
+            0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * k as f64 / n.max(1) as f64).cos());
+        let (surface, free, inside) = (
+            draw(obs.surface, &mut rng),
+            draw(obs.free, &mut rng),
+            draw(obs.inside, &mut rng),
+        );
         let loss = frame.loss(&v, &surface, &free, &inside, obs.support)?;
         let value = scalar(&loss)?;
         if !value.is_finite() {
-            return Err(SdfError::Invalid(format!("placed-shape fit diverged at step {step}")));
+            return Err(SdfError::Invalid(format!(
+                "placed-shape fit diverged at step {step}"
+            )));
         }
         curve.push(value);
         let grads = loss.backward()?;
@@ -257,34 +361,81 @@ pub fn fit_placed(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>
             opt.step(&grads)?;
         }
         // Fold the rotation step into R₀.
-        let d = v.delta.as_tensor().to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+        let d = v
+            .delta
+            .as_tensor()
+            .to_dtype(DType::F64)?
+            .flatten_all()?
+            .to_vec1::<f64>()?;
         frame.r0 *= axis_angle_to_matrix(&Vector3::new(d[0], d[1], d[2]));
         v.delta.set(&tensor(vec![0.0; 3], &[1, 3], dt)?)?;
     }
     let loss = scalar(&frame.loss(&v, obs.surface, obs.free, obs.inside, obs.support)?)?;
-    let z = v.z.as_tensor().to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
-    let tau = v.tau.as_tensor().to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+    let z =
+        v.z.as_tensor()
+            .to_dtype(DType::F64)?
+            .flatten_all()?
+            .to_vec1::<f64>()?;
+    let tau = v
+        .tau
+        .as_tensor()
+        .to_dtype(DType::F64)?
+        .flatten_all()?
+        .to_vec1::<f64>()?;
     let log_s = scalar(&v.log_s.as_tensor().flatten_all()?.get(0)?)?;
-    let depth_from_object = Similarity3 { rotation: frame.r0, translation: frame.t0 + Vector3::new(tau[0], tau[1], tau[2]) * obs.unit_m, scale: frame.s0 * log_s.exp() };
-    Ok(PlacedFit { latent: z, depth_from_object, loss, curve })
+    let depth_from_object = Similarity3 {
+        rotation: frame.r0,
+        translation: frame.t0 + Vector3::new(tau[0], tau[1], tau[2]) * obs.unit_m,
+        scale: frame.s0 * log_s.exp(),
+    };
+    Ok(PlacedFit {
+        latent: z,
+        depth_from_object,
+        loss,
+        curve,
+    })
 }
 
 /// The loss and its gradient in f64 at `(latent, δ = 0, τ, ln s/s₀)` — what [`fit_placed`]
 /// descends, for gradient checks: `[∂z…, ∂δ (3), ∂τ (3), ∂ln s]`.
-pub fn loss_and_gradient(net: &SdfNet, obs: &PlacedObservation, init: &Similarity3<f64>, latent: &[f64], delta: Vector3<f64>, tau: Vector3<f64>, log_s: f64, cfg: &PlacedFitConfig) -> Result<(f64, Vec<f64>), SdfError> {
+pub fn loss_and_gradient(
+    net: &SdfNet,
+    obs: &PlacedObservation,
+    init: &Similarity3<f64>,
+    latent: &[f64],
+    delta: Vector3<f64>,
+    tau: Vector3<f64>,
+    log_s: f64,
+    cfg: &PlacedFitConfig,
+) -> Result<(f64, Vec<f64>), SdfError> {
     check(net, obs, init, latent)?;
     let dt = DType::F64;
-    let layers: Vec<(Tensor, Tensor)> = net.tensors(&Device::Cpu)?.into_iter().map(|(w, b)| Ok((w.to_dtype(dt)?, b.to_dtype(dt)?))).collect::<candle_core::Result<_>>()?;
+    let layers: Vec<(Tensor, Tensor)> = net
+        .tensors(&Device::Cpu)?
+        .into_iter()
+        .map(|(w, b)| Ok((w.to_dtype(dt)?, b.to_dtype(dt)?)))
+        .collect::<candle_core::Result<_>>()?;
     let v = vars(latent, dt)?;
-    v.delta.set(&tensor(delta.as_slice().to_vec(), &[1, 3], dt)?)?;
+    v.delta
+        .set(&tensor(delta.as_slice().to_vec(), &[1, 3], dt)?)?;
     v.tau.set(&tensor(tau.as_slice().to_vec(), &[1, 3], dt)?)?;
     v.log_s.set(&tensor(vec![log_s], &[1, 1], dt)?)?;
-    let frame = Frame { net: &layers, r0: init.rotation, t0: init.translation, s0: init.scale, obs, cfg, dtype: dt };
+    let frame = Frame {
+        net: &layers,
+        r0: init.rotation,
+        t0: init.translation,
+        s0: init.scale,
+        obs,
+        cfg,
+        dtype: dt,
+    };
     let loss = frame.loss(&v, obs.surface, obs.free, obs.inside, obs.support)?;
     let grads = loss.backward()?;
     let mut g = Vec::new();
     for var in [&v.z, &v.delta, &v.tau, &v.log_s] {
-        let gt = grads.get(var.as_tensor()).ok_or_else(|| SdfError::Invalid("no gradient".into()))?;
+        let gt = grads
+            .get(var.as_tensor())
+            .ok_or_else(|| SdfError::Invalid("no gradient".into()))?;
         g.extend(gt.flatten_all()?.to_vec1::<f64>()?);
     }
     Ok((scalar(&loss)?, g))

@@ -5,19 +5,24 @@ use crate::SdfError;
 use crate::infer::InferConfig;
 use crate::mesh_sdf::MeshSdf;
 use crate::net::{LatentSdf, SdfNet};
-use serde::{Deserialize, Serialize};
-use std::sync::Arc;
-use std::time::Instant;
 use irmirror_geom::TriMesh;
 use nalgebra::Vector3;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+use std::time::Instant;
 
 /// The zero level set of latent `z` as a mesh (marching tetrahedra over [−1, 1]³, `resolution`
 /// cells per axis, batched network evaluation; normals outward).
 pub fn extract_mesh(net: &SdfNet, z: &[f64], resolution: usize) -> Result<TriMesh, SdfError> {
     let (lo, hi) = (Vector3::repeat(-1.0), Vector3::repeat(1.0));
-    let values = net.eval_batch(z, &irmirror_geom::isosurface::grid_points(lo, hi, resolution))?;
-    Ok(irmirror_geom::isosurface::isosurface_grid(&values, lo, hi, resolution))
+    let values = net.eval_batch(
+        z,
+        &irmirror_geom::isosurface::grid_points(lo, hi, resolution),
+    )?;
+    Ok(irmirror_geom::isosurface::isosurface_grid(
+        &values, lo, hi, resolution,
+    ))
 }
 
 /// Pieces of an extracted mesh smaller than this fraction of the largest piece's volume are
@@ -56,18 +61,34 @@ pub struct HeldOutFigures {
 /// Evaluates `net` on `n` held-out procedural shapes (stream 2 of `seed`; training uses
 /// stream 1): latent inference from `samples` SDF samples, mesh extraction, Chamfer to the true
 /// mesh (30k points each way), eikonal error, throughput.
-pub fn held_out(net: &Arc<SdfNet>, n: usize, samples: usize, seed: u64, cfg: &InferConfig, mut progress: impl FnMut(usize)) -> Result<HeldOutFigures, SdfError> {
+pub fn held_out(
+    net: &Arc<SdfNet>,
+    n: usize,
+    samples: usize,
+    seed: u64,
+    cfg: &InferConfig,
+    mut progress: impl FnMut(usize),
+) -> Result<HeldOutFigures, SdfError> {
     let truth = crate::train::procedural(net.category, n, seed, 2, 112);
     let (mut ch, mut eik, mut l1, mut t_inf, mut bbox) = (Vec::new(), 0.0, 0.0, 0.0, 0.0);
     let (mut pps, mut bpps) = (0.0, 0.0);
     for (k, (_, mesh)) in truth.iter().enumerate() {
-        let s = MeshSdf::new(mesh).samples(samples, &mut irmirror_geom::rng::seeded(seed, 5000 + k as u64));
+        let s = MeshSdf::new(mesh).samples(
+            samples,
+            &mut irmirror_geom::rng::seeded(seed, 5000 + k as u64),
+        );
         let t0 = Instant::now();
         let inf = crate::infer::from_samples(net, &s, cfg)?;
         t_inf += t0.elapsed().as_secs_f64();
         l1 += inf.loss;
         let shape = net.shape(&inf.latent)?;
-        let near: Vec<[f32; 3]> = s.points.iter().zip(&s.sdf).filter(|(_, d)| d.abs() < 0.05).map(|(p, _)| *p).collect();
+        let near: Vec<[f32; 3]> = s
+            .points
+            .iter()
+            .zip(&s.sdf)
+            .filter(|(_, d)| d.abs() < 0.05)
+            .map(|(p, _)| *p)
+            .collect();
         let t0 = Instant::now();
         eik += eikonal_error(&shape, &near);
         pps += near.len() as f64 / t0.elapsed().as_secs_f64();
@@ -107,7 +128,10 @@ pub fn chamfer(a: &TriMesh, b: &TriMesh, n: usize, seed: u64) -> f64 {
     let one_way = |from: &MeshSdf, to: &MeshSdf, stream: u64| {
         let mut rng = irmirror_geom::rng::seeded(seed, stream);
         let pts: Vec<Vector3<f64>> = (0..n).map(|_| from.surface_point(&mut rng)).collect();
-        pts.par_iter().map(|p| to.unsigned_distance(p).powi(2)).sum::<f64>() / n as f64
+        pts.par_iter()
+            .map(|p| to.unsigned_distance(p).powi(2))
+            .sum::<f64>()
+            / n as f64
     };
     0.5 * (one_way(&sa, &sb, 1) + one_way(&sb, &sa, 2))
 }
@@ -116,13 +140,29 @@ pub fn chamfer(a: &TriMesh, b: &TriMesh, n: usize, seed: u64) -> f64 {
 /// empty.
 pub fn bbox_error(a: &TriMesh, b: &TriMesh) -> f64 {
     match (a.bounds(), b.bounds()) {
-        (Some((alo, ahi)), Some((blo, bhi))) => (0..3).map(|k| f64::from((alo[k] - blo[k]).abs().max((ahi[k] - bhi[k]).abs()))).fold(0.0, f64::max),
+        (Some((alo, ahi)), Some((blo, bhi))) => (0..3)
+            .map(|k| f64::from((alo[k] - blo[k]).abs().max((ahi[k] - bhi[k]).abs())))
+            .fold(0.0, f64::max),
         _ => f64::INFINITY,
     }
 }
 
 /// Mean `| |∇f| − 1 |` over `points` (e.g. samples within 0.05 of the surface).
 pub fn eikonal_error(shape: &LatentSdf, points: &[[f32; 3]]) -> f64 {
-    let s: f64 = points.par_iter().map(|p| (shape.value_grad(&Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).1.norm() - 1.0).abs()).sum();
+    let s: f64 = points
+        .par_iter()
+        .map(|p| {
+            (shape
+                .value_grad(&Vector3::new(
+                    f64::from(p[0]),
+                    f64::from(p[1]),
+                    f64::from(p[2]),
+                ))
+                .1
+                .norm()
+                - 1.0)
+                .abs()
+        })
+        .sum();
     s / points.len().max(1) as f64
 }

@@ -4,10 +4,10 @@
 //! weights, latents and batches all come from seeded generators; the sample values are
 //! computed in parallel but each is a pure function of its point.
 
+use crate::SdfError;
 use crate::families::{Category, FamilyShape};
 use crate::mesh_sdf::{MeshSdf, SdfSamples};
 use crate::net::{self, SdfNet};
-use crate::SdfError;
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use irmirror_geom::TriMesh;
@@ -81,14 +81,25 @@ pub struct TrainSdfReport {
 
 /// `n` procedural members of `category` with their meshes, drawn from stream `stream` of `seed`
 /// (training and held-out sets use different streams).
-pub fn procedural(category: Category, n: usize, seed: u64, stream: u64, resolution: usize) -> Vec<(FamilyShape, TriMesh)> {
-    procedural_params(category, n, seed, stream).into_iter().map(|s| (s, s.mesh(resolution))).collect()
+pub fn procedural(
+    category: Category,
+    n: usize,
+    seed: u64,
+    stream: u64,
+    resolution: usize,
+) -> Vec<(FamilyShape, TriMesh)> {
+    procedural_params(category, n, seed, stream)
+        .into_iter()
+        .map(|s| (s, s.mesh(resolution)))
+        .collect()
 }
 
 /// The parameters of [`procedural`]'s shapes, without meshing them.
 pub fn procedural_params(category: Category, n: usize, seed: u64, stream: u64) -> Vec<FamilyShape> {
     let mut rng = irmirror_geom::rng::seeded(seed, stream);
-    (0..n).map(|_| FamilyShape::sample(category, &mut rng)).collect()
+    (0..n)
+        .map(|_| FamilyShape::sample(category, &mut rng))
+        .collect()
 }
 
 /// SDF samples for each mesh (`n` per mesh), deterministic for `seed`.
@@ -96,28 +107,56 @@ pub fn sample_meshes(meshes: &[&TriMesh], n: usize, seed: u64) -> Vec<SdfSamples
     meshes
         .iter()
         .enumerate()
-        .map(|(k, m)| MeshSdf::new(m).samples(n, &mut irmirror_geom::rng::seeded(seed, 1000 + k as u64)))
+        .map(|(k, m)| {
+            MeshSdf::new(m).samples(n, &mut irmirror_geom::rng::seeded(seed, 1000 + k as u64))
+        })
         .collect()
 }
 
-fn init_layers(l: usize, w: usize, rng: &mut impl Rng, dev: &Device) -> Result<Vec<(Var, Var)>, SdfError> {
+fn init_layers(
+    l: usize,
+    w: usize,
+    rng: &mut impl Rng,
+    dev: &Device,
+) -> Result<Vec<(Var, Var)>, SdfError> {
     let shapes = [(w, l + 3), (w, w), (w, w + l + 3), (w, w), (1, w)];
     shapes
         .iter()
         .enumerate()
         .map(|(k, &(o, i))| {
             // He-uniform; the output layer starts small so the first field is near zero.
-            let bound = if k == 4 { 0.1 / (i as f64).sqrt() } else { (6.0 / i as f64).sqrt() };
-            let wv: Vec<f32> = (0..o * i).map(|_| rng.random_range(-bound..bound) as f32).collect();
-            Ok((Var::from_tensor(&Tensor::from_vec(wv, (o, i), dev)?)?, Var::from_tensor(&Tensor::zeros(o, DType::F32, dev)?)?))
+            let bound = if k == 4 {
+                0.1 / (i as f64).sqrt()
+            } else {
+                (6.0 / i as f64).sqrt()
+            };
+            let wv: Vec<f32> = (0..o * i)
+                .map(|_| rng.random_range(-bound..bound) as f32)
+                .collect();
+            Ok((
+                Var::from_tensor(&Tensor::from_vec(wv, (o, i), dev)?)?,
+                Var::from_tensor(&Tensor::zeros(o, DType::F32, dev)?)?,
+            ))
         })
         .collect()
 }
 
 /// Trains a prior on `data` (one sample set per shape); `progress(step, l1)` every 25 steps.
-pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, metadata: BTreeMap<String, String>, mut progress: impl FnMut(usize, f64)) -> Result<(SdfNet, TrainSdfReport), SdfError> {
-    if data.is_empty() || data.iter().any(|d| d.points.is_empty() || d.points.len() != d.sdf.len()) {
-        return Err(SdfError::Invalid("training needs at least one shape with samples".into()));
+pub fn train(
+    category: Category,
+    data: &[SdfSamples],
+    cfg: &TrainSdfConfig,
+    metadata: BTreeMap<String, String>,
+    mut progress: impl FnMut(usize, f64),
+) -> Result<(SdfNet, TrainSdfReport), SdfError> {
+    if data.is_empty()
+        || data
+            .iter()
+            .any(|d| d.points.is_empty() || d.points.len() != d.sdf.len())
+    {
+        return Err(SdfError::Invalid(
+            "training needs at least one shape with samples".into(),
+        ));
     }
     let dev = Device::Cpu;
     let (l, w) = (cfg.latent_dim, cfg.width);
@@ -127,18 +166,40 @@ pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, meta
     let normal = Normal::new(0.0, 0.01).expect("valid σ");
     let z0: Vec<f32> = (0..n * l).map(|_| normal.sample(&mut rng) as f32).collect();
     let latents = Var::from_tensor(&Tensor::from_vec(z0, (n, l), &dev)?)?;
-    let net_vars: Vec<Var> = layers.iter().flat_map(|(a, b)| [a.clone(), b.clone()]).collect();
-    let mut opt_net = AdamW::new(net_vars, ParamsAdamW { lr: cfg.lr_net, weight_decay: 0.0, ..Default::default() })?;
-    let mut opt_lat = AdamW::new(vec![latents.clone()], ParamsAdamW { lr: cfg.lr_latent, weight_decay: 0.0, ..Default::default() })?;
+    let net_vars: Vec<Var> = layers
+        .iter()
+        .flat_map(|(a, b)| [a.clone(), b.clone()])
+        .collect();
+    let mut opt_net = AdamW::new(
+        net_vars,
+        ParamsAdamW {
+            lr: cfg.lr_net,
+            weight_decay: 0.0,
+            ..Default::default()
+        },
+    )?;
+    let mut opt_lat = AdamW::new(
+        vec![latents.clone()],
+        ParamsAdamW {
+            lr: cfg.lr_latent,
+            weight_decay: 0.0,
+            ..Default::default()
+        },
+    )?;
     let per_batch = cfg.shapes_per_batch.min(n).max(1);
     let batch = per_batch * cfg.points_per_shape;
     let t0 = std::time::Instant::now();
     let mut recent = std::collections::VecDeque::with_capacity(101);
-    let (mut pts, mut tgt, mut idx) = (Vec::with_capacity(batch * 3), Vec::with_capacity(batch), Vec::with_capacity(batch));
+    let (mut pts, mut tgt, mut idx) = (
+        Vec::with_capacity(batch * 3),
+        Vec::with_capacity(batch),
+        Vec::with_capacity(batch),
+    );
     let mut order: Vec<usize> = (0..n).collect();
     for step in 0..cfg.steps {
         // Cosine decay to 5 % of the start.
-        let decay = 0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / cfg.steps as f64).cos());
+        let decay = 0.05
+            + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / cfg.steps as f64).cos());
         opt_net.set_learning_rate(cfg.lr_net * decay);
         opt_lat.set_learning_rate(cfg.lr_latent * decay);
         // Shapes without replacement (partial Fisher–Yates), points with replacement.
@@ -163,7 +224,10 @@ pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, meta
         let shape_idx = Tensor::from_slice(&idx, batch, &dev)?;
         let z = latents.as_tensor().index_select(&shape_idx, 0)?;
         let x = Tensor::cat(&[&z, &p], 1)?;
-        let tensors: Vec<(Tensor, Tensor)> = layers.iter().map(|(a, b)| (a.as_tensor().clone(), b.as_tensor().clone())).collect();
+        let tensors: Vec<(Tensor, Tensor)> = layers
+            .iter()
+            .map(|(a, b)| (a.as_tensor().clone(), b.as_tensor().clone()))
+            .collect();
         let f = net::forward(&tensors, &x)?.clamp(-net::CLAMP as f32, net::CLAMP as f32)?;
         let l1 = (f - &t)?.abs()?.mean_all()?;
         let reg = z.sqr()?.sum(1)?.mean_all()?.affine(cfg.latent_reg, 0.0)?;
@@ -173,7 +237,9 @@ pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, meta
         opt_lat.step(&grads)?;
         let l1v = f64::from(l1.to_scalar::<f32>()?);
         if !l1v.is_finite() {
-            return Err(SdfError::Invalid(format!("training diverged at step {step} (loss {l1v})")));
+            return Err(SdfError::Invalid(format!(
+                "training diverged at step {step} (loss {l1v})"
+            )));
         }
         recent.push_back(l1v);
         if recent.len() > 100 {
@@ -186,10 +252,21 @@ pub fn train(category: Category, data: &[SdfSamples], cfg: &TrainSdfConfig, meta
     let train_s = t0.elapsed().as_secs_f64();
     let parts: Vec<(Vec<f32>, Vec<f32>)> = layers
         .iter()
-        .map(|(a, b)| Ok((a.as_tensor().flatten_all()?.to_vec1::<f32>()?, b.as_tensor().to_vec1::<f32>()?)))
+        .map(|(a, b)| {
+            Ok((
+                a.as_tensor().flatten_all()?.to_vec1::<f32>()?,
+                b.as_tensor().to_vec1::<f32>()?,
+            ))
+        })
         .collect::<Result<_, candle_core::Error>>()?;
     let lat: Vec<Vec<f32>> = latents.as_tensor().to_vec2::<f32>()?;
     let net = SdfNet::from_parts(category, l, w, parts, lat, metadata)?;
-    let report = TrainSdfReport { config: cfg.clone(), training_shapes: n, data_s: 0.0, train_s, final_l1: recent.iter().sum::<f64>() / recent.len().max(1) as f64 };
+    let report = TrainSdfReport {
+        config: cfg.clone(),
+        training_shapes: n,
+        data_s: 0.0,
+        train_s,
+        final_l1: recent.iter().sum::<f64>() / recent.len().max(1) as f64,
+    };
     Ok((net, report))
 }

@@ -25,7 +25,11 @@ fn generators_are_watertight_outward_and_normalised() {
             for v in &mesh.vertices {
                 let p = Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
                 assert!(p.norm() < 1.0, "{cat:?}: vertex outside the unit sphere");
-                assert!(shape.distance(&p).abs() < 0.02, "{cat:?}: vertex off the surface by {}", shape.distance(&p));
+                assert!(
+                    shape.distance(&p).abs() < 0.02,
+                    "{cat:?}: vertex off the surface by {}",
+                    shape.distance(&p)
+                );
             }
         }
     }
@@ -39,13 +43,20 @@ fn sample_signs_agree_with_the_analytic_inside() {
         assert_eq!(s.points.len(), 3000);
         let (mut checked, mut wrong) = (0, 0);
         for (p, d) in s.points.iter().zip(&s.sdf) {
-            let a = shape.distance(&Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])));
+            let a = shape.distance(&Vector3::new(
+                f64::from(p[0]),
+                f64::from(p[1]),
+                f64::from(p[2]),
+            ));
             // Away from the surface the meshing error (< 0.01) cannot flip the sign.
             if a.abs() > 0.01 {
                 checked += 1;
                 wrong += usize::from((a < 0.0) != (*d < 0.0));
                 // Car and mug fields are bounds (smooth unions, cut-outs), not exact distances.
-                assert!((f64::from(*d) - a).abs() < 0.1, "{cat:?}: sample {d} vs analytic {a}");
+                assert!(
+                    (f64::from(*d) - a).abs() < 0.1,
+                    "{cat:?}: sample {d} vs analytic {a}"
+                );
             }
         }
         assert!(checked > 1500);
@@ -62,7 +73,10 @@ fn random_net(l: usize, w: usize, seed: u64) -> SdfNet {
         .iter()
         .map(|&(o, i)| {
             let b = (3.0 / i as f64).sqrt();
-            ((0..o * i).map(|_| rng.random_range(-b..b) as f32).collect(), (0..o).map(|_| rng.random_range(-0.1..0.1) as f32).collect())
+            (
+                (0..o * i).map(|_| rng.random_range(-b..b) as f32).collect(),
+                (0..o).map(|_| rng.random_range(-0.1..0.1) as f32).collect(),
+            )
         })
         .collect();
     let latents = vec![(0..l).map(|_| rng.random_range(-0.5..0.5) as f32).collect()];
@@ -79,19 +93,30 @@ fn network_gradients_match_finite_differences() {
         let (f, gz, gp) = net.eval_full(&z, &p);
         let (f2, gp2) = shape.value_grad(&p);
         assert!((f - f2).abs() < 1e-12, "folded latent changes the value");
-        assert!((gp - gp2).norm() < 1e-12, "fast and reference point gradients differ");
+        assert!(
+            (gp - gp2).norm() < 1e-12,
+            "fast and reference point gradients differ"
+        );
         for k in 0..3 {
             let mut e = Vector3::zeros();
             e[k] = h;
             let fd = (net.eval_full(&z, &(p + e)).0 - net.eval_full(&z, &(p - e)).0) / (2.0 * h);
-            assert!((fd - gp[k]).abs() < 1e-7 * (1.0 + fd.abs()), "∂f/∂p{k}: {fd} vs {}", gp[k]);
+            assert!(
+                (fd - gp[k]).abs() < 1e-7 * (1.0 + fd.abs()),
+                "∂f/∂p{k}: {fd} vs {}",
+                gp[k]
+            );
         }
         for k in 0..z.len() {
             let (mut zp, mut zm) = (z.clone(), z.clone());
             zp[k] += h;
             zm[k] -= h;
             let fd = (net.eval_full(&zp, &p).0 - net.eval_full(&zm, &p).0) / (2.0 * h);
-            assert!((fd - gz[k]).abs() < 1e-7 * (1.0 + fd.abs()), "∂f/∂z{k}: {fd} vs {}", gz[k]);
+            assert!(
+                (fd - gz[k]).abs() < 1e-7 * (1.0 + fd.abs()),
+                "∂f/∂z{k}: {fd} vs {}",
+                gz[k]
+            );
         }
         // The batched (candle, f32) path agrees with the f64 one.
         let b = net.eval_batch(&z, &[p]).unwrap()[0];
@@ -104,35 +129,109 @@ fn tiny_training_learns_and_inference_recovers_a_training_shape() {
     let shapes = procedural(Category::Mug, 4, 9, 1, 48);
     let meshes: Vec<_> = shapes.iter().map(|(_, m)| m).collect();
     let data = sample_meshes(&meshes, 4000, 9);
-    let cfg = TrainSdfConfig { steps: 300, width: 64, shapes_per_batch: 4, points_per_shape: 512, ..Default::default() };
+    let cfg = TrainSdfConfig {
+        steps: 300,
+        width: 64,
+        shapes_per_batch: 4,
+        points_per_shape: 512,
+        ..Default::default()
+    };
     let mut curve = Vec::new();
-    let (net, report) = train(Category::Mug, &data, &cfg, BTreeMap::new(), |_, l| curve.push(l)).unwrap();
-    assert!(report.final_l1 < 0.8 * curve[0], "loss {} → {}", curve[0], report.final_l1);
+    let (net, report) = train(Category::Mug, &data, &cfg, BTreeMap::new(), |_, l| {
+        curve.push(l)
+    })
+    .unwrap();
+    assert!(
+        report.final_l1 < 0.8 * curve[0],
+        "loss {} → {}",
+        curve[0],
+        report.final_l1
+    );
     // Determinism: the same seed gives the same network.
-    let short = TrainSdfConfig { steps: 20, ..cfg.clone() };
+    let short = TrainSdfConfig {
+        steps: 20,
+        ..cfg.clone()
+    };
     let (a, _) = train(Category::Mug, &data, &short, BTreeMap::new(), |_, _| {}).unwrap();
     let (b, _) = train(Category::Mug, &data, &short, BTreeMap::new(), |_, _| {}).unwrap();
     assert_eq!(a.train_latents, b.train_latents);
     // Inference on shape 0's samples fits them about as well as its trained latent.
     let l1 = |z: &[f64]| {
-        let pts: Vec<Vector3<f64>> = data[0].points.iter().map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).collect();
+        let pts: Vec<Vector3<f64>> = data[0]
+            .points
+            .iter()
+            .map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
+            .collect();
         let f = net.eval_batch(z, &pts).unwrap();
-        f.iter().zip(&data[0].sdf).map(|(a, b)| (a.clamp(-0.1, 0.1) - f64::from(*b).clamp(-0.1, 0.1)).abs()).sum::<f64>() / f.len() as f64
+        f.iter()
+            .zip(&data[0].sdf)
+            .map(|(a, b)| (a.clamp(-0.1, 0.1) - f64::from(*b).clamp(-0.1, 0.1)).abs())
+            .sum::<f64>()
+            / f.len() as f64
     };
     let trained = l1(&net.train_latents[0]);
-    let inferred = from_samples(&net, &data[0], &InferConfig { steps: 200, ..Default::default() }).unwrap();
+    let inferred = from_samples(
+        &net,
+        &data[0],
+        &InferConfig {
+            steps: 200,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let mean = l1(&net.mean_latent());
-    assert!(l1(&inferred.latent) < 1.3 * trained + 2e-3, "inferred {} vs trained {trained}", l1(&inferred.latent));
-    assert!(l1(&inferred.latent) < mean, "inference does not improve on the mean latent");
+    assert!(
+        l1(&inferred.latent) < 1.3 * trained + 2e-3,
+        "inferred {} vs trained {trained}",
+        l1(&inferred.latent)
+    );
+    assert!(
+        l1(&inferred.latent) < mean,
+        "inference does not improve on the mean latent"
+    );
     // From surface points only (plus free space), the fit also beats the mean shape.
-    let surface: Vec<[f32; 3]> = data[0].points.iter().zip(&data[0].sdf).filter(|(_, d)| d.abs() < 0.005).map(|(p, _)| *p).collect();
-    let free: Vec<[f32; 3]> = data[0].points.iter().zip(&data[0].sdf).filter(|(_, d)| **d > 0.05).map(|(p, _)| *p).collect();
-    let s = from_surface(&net, &surface, &free, &InferConfig { steps: 200, ..Default::default() }).unwrap();
+    let surface: Vec<[f32; 3]> = data[0]
+        .points
+        .iter()
+        .zip(&data[0].sdf)
+        .filter(|(_, d)| d.abs() < 0.005)
+        .map(|(p, _)| *p)
+        .collect();
+    let free: Vec<[f32; 3]> = data[0]
+        .points
+        .iter()
+        .zip(&data[0].sdf)
+        .filter(|(_, d)| **d > 0.05)
+        .map(|(p, _)| *p)
+        .collect();
+    let s = from_surface(
+        &net,
+        &surface,
+        &free,
+        &InferConfig {
+            steps: 200,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let on_surface = |z: &[f64]| {
-        let pts: Vec<Vector3<f64>> = surface.iter().map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))).collect();
-        net.eval_batch(z, &pts).unwrap().iter().map(|f| f.abs()).sum::<f64>() / pts.len() as f64
+        let pts: Vec<Vector3<f64>> = surface
+            .iter()
+            .map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
+            .collect();
+        net.eval_batch(z, &pts)
+            .unwrap()
+            .iter()
+            .map(|f| f.abs())
+            .sum::<f64>()
+            / pts.len() as f64
     };
-    assert!(on_surface(&s.latent) < 0.8 * on_surface(&net.mean_latent()), "surface inference: {} vs mean {}", on_surface(&s.latent), on_surface(&net.mean_latent()));
+    assert!(
+        on_surface(&s.latent) < 0.8 * on_surface(&net.mean_latent()),
+        "surface inference: {} vs mean {}",
+        on_surface(&s.latent),
+        on_surface(&net.mean_latent())
+    );
 }
 
 #[test]
@@ -149,11 +248,22 @@ fn weights_round_trip_and_bad_weights_are_clear_errors() {
     // Truncated file.
     let bytes = std::fs::read(&path).unwrap();
     std::fs::write(dir.join("t.safetensors"), &bytes[..bytes.len() / 2]).unwrap();
-    assert!(matches!(SdfNet::load(&dir.join("t.safetensors")), Err(SdfError::Weights { .. })));
+    assert!(matches!(
+        SdfNet::load(&dir.join("t.safetensors")),
+        Err(SdfError::Weights { .. })
+    ));
     // A pose-prior-like file (wrong tensors).
-    assert!(SdfNet::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/pose_prior/pose_vae.safetensors"))).is_err());
+    assert!(
+        SdfNet::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../assets/pose_prior/pose_vae.safetensors"
+        )))
+        .is_err()
+    );
     // Missing file.
-    let e = SdfNet::load(&dir.join("missing.safetensors")).unwrap_err().to_string();
+    let e = SdfNet::load(&dir.join("missing.safetensors"))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("cannot read"), "{e}");
     // Wrong latent length.
     assert!(Arc::new(net).shape(&[0.0; 3]).is_err());
@@ -165,7 +275,11 @@ fn bad_meshes_are_clear_errors_and_stl_is_welded() {
     let dir = tmpdir("meshes");
     std::fs::write(dir.join("empty.obj"), "").unwrap();
     assert!(read_mesh(&dir.join("empty.obj")).is_err());
-    std::fs::write(dir.join("nan.obj"), "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n").unwrap();
+    std::fs::write(
+        dir.join("nan.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n",
+    )
+    .unwrap();
     assert!(read_mesh(&dir.join("nan.obj")).is_err());
     std::fs::write(dir.join("x.stl"), "garbage").unwrap();
     assert!(read_mesh(&dir.join("x.stl")).is_err());
@@ -197,7 +311,11 @@ fn bad_meshes_are_clear_errors_and_stl_is_welded() {
         assert_eq!(m.vertices.len(), 8, "{f}");
         assert_eq!(open_edges(&m), 0, "{f}");
         normalise(&mut m);
-        let r = m.vertices.iter().map(|v| v.iter().map(|x| x * x).sum::<f32>().sqrt()).fold(0.0, f32::max);
+        let r = m
+            .vertices
+            .iter()
+            .map(|v| v.iter().map(|x| x * x).sum::<f32>().sqrt())
+            .fold(0.0, f32::max);
         assert!((r - 0.9).abs() < 1e-5, "normalised radius {r}");
         // The cube's winding number is 1 at its centre after normalisation.
         assert!((MeshSdf::new(&m).winding_number(&Vector3::zeros()) - 1.0).abs() < 1e-9);
@@ -212,14 +330,21 @@ fn bad_meshes_are_clear_errors_and_stl_is_welded() {
 
 #[test]
 fn shipped_priors_load_and_describe_a_closed_surface() {
-    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/object_priors"));
+    let dir = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../assets/object_priors"
+    ));
     for cat in Category::ALL {
         let net = Arc::new(SdfNet::load(&dir.join(format!("{}.safetensors", cat.name()))).unwrap());
         assert_eq!(net.category, cat);
-        assert!(net.metadata["command"].contains(&format!("--category {}", cat.name())), "provenance");
+        assert!(
+            net.metadata["command"].contains(&format!("--category {}", cat.name())),
+            "provenance"
+        );
         // A training shape: outside at the corners of the box, inside somewhere, a surface.
         let shape = net.shape(&net.train_latents[0]).unwrap();
-        let grid: Vec<Vector3<f64>> = irmirror_geom::isosurface::grid_points(Vector3::repeat(-1.0), Vector3::repeat(1.0), 24);
+        let grid: Vec<Vector3<f64>> =
+            irmirror_geom::isosurface::grid_points(Vector3::repeat(-1.0), Vector3::repeat(1.0), 24);
         let v = net.eval_batch(&net.train_latents[0], &grid).unwrap();
         assert!(v.iter().any(|d| *d < 0.0), "{cat:?}: no inside");
         for corner in [Vector3::new(1.0, 1.0, 1.0), Vector3::new(-1.0, -1.0, 1.0)] {
@@ -233,13 +358,22 @@ fn shipped_priors_load_and_describe_a_closed_surface() {
 
 #[test]
 fn builtin_priors_are_the_shipped_files() {
-    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/object_priors"));
+    let dir = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../assets/object_priors"
+    ));
     for cat in Category::ALL {
         let built_in = SdfNet::builtin(cat).unwrap();
         let file = SdfNet::load(&dir.join(format!("{}.safetensors", cat.name()))).unwrap();
         assert_eq!(built_in.category, cat);
         assert_eq!(built_in.train_latents, file.train_latents);
-        assert_eq!(built_in.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3)).0, file.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3)).0);
+        assert_eq!(
+            built_in
+                .eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3))
+                .0,
+            file.eval_full(&file.train_latents[0], &Vector3::new(0.1, 0.2, -0.3))
+                .0
+        );
     }
 }
 
@@ -249,13 +383,17 @@ fn bbox_error_is_the_largest_face_offset() {
     assert_eq!(irmirror_sdf::quality::bbox_error(&mesh, &mesh), 0.0);
     // Moving one vertex on the +x face out by 0.1 moves only that face.
     let mut grown = mesh.clone();
-    let i = (0..grown.vertices.len()).max_by(|&a, &b| grown.vertices[a][0].total_cmp(&grown.vertices[b][0])).unwrap();
+    let i = (0..grown.vertices.len())
+        .max_by(|&a, &b| grown.vertices[a][0].total_cmp(&grown.vertices[b][0]))
+        .unwrap();
     grown.vertices[i][0] += 0.1;
     assert!((irmirror_sdf::quality::bbox_error(&grown, &mesh) - 0.1).abs() < 1e-6);
     let mut shifted = mesh.clone();
     shifted.vertices.iter_mut().for_each(|v| v[1] -= 0.03);
     assert!((irmirror_sdf::quality::bbox_error(&mesh, &shifted) - 0.03).abs() < 1e-6);
-    assert!(irmirror_sdf::quality::bbox_error(&mesh, &irmirror_geom::TriMesh::default()).is_infinite());
+    assert!(
+        irmirror_sdf::quality::bbox_error(&mesh, &irmirror_geom::TriMesh::default()).is_infinite()
+    );
 }
 
 /// Held-out figures of a shipped (or `WEIGHTS=path`) prior: `CATEGORY=mug N=8 cargo test --release
@@ -268,7 +406,11 @@ fn held_out_report() {
         Ok(p) => Arc::new(SdfNet::load(std::path::Path::new(&p)).unwrap()),
         Err(_) => SdfNet::builtin(cat).unwrap(),
     };
-    let n = std::env::var("N").ok().and_then(|s| s.parse().ok()).unwrap_or(8);
-    let figs = irmirror_sdf::quality::held_out(&net, n, 8000, 0, &InferConfig::default(), |_| {}).unwrap();
+    let n = std::env::var("N")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(8);
+    let figs =
+        irmirror_sdf::quality::held_out(&net, n, 8000, 0, &InferConfig::default(), |_| {}).unwrap();
     println!("{}", serde_json::to_string_pretty(&figs).unwrap());
 }

@@ -25,5 +25,7 @@ pub fn random_pose(model: &BodyModel, rng: &mut impl Rng) -> (String, Vec<[f64; 
 
 /// A named template pose (see `irmirror_body::prior::generator::TEMPLATES`), or the A-pose.
 pub fn named(model: &BodyModel, name: &str, rng: &mut impl Rng) -> Vec<[f64; 3]> {
-    PoseGenerator::new(model).template(name, rng).unwrap_or_else(|| vec![[0.0; 3]; model.n_joints()])
+    PoseGenerator::new(model)
+        .template(name, rng)
+        .unwrap_or_else(|| vec![[0.0; 3]; model.n_joints()])
 }

@@ -2,7 +2,7 @@
 
 use crate::people::{random_phenotype, random_pose};
 use crate::scene::{SceneFile, ThermalPreset, car, tabletop};
-use crate::{SimError, Sensor};
+use crate::{Sensor, SimError};
 use irmirror_body::BodyModel;
 use serde::{Deserialize, Serialize};
 
@@ -37,12 +37,23 @@ pub const MIN_REFLECTION_PIXELS: usize = 12;
 /// The scene for a preset and seed whose reflection is visible: draws scenes from the seed's
 /// successive streams and keeps the first with ≥ [`MIN_REFLECTION_PIXELS`] reflection pixels
 /// (or the last drawn).
-pub fn preset_scene(model: &BodyModel, preset: Preset, thermal: ThermalPreset, seed: u64) -> Result<SceneFile, SimError> {
+pub fn preset_scene(
+    model: &BodyModel,
+    preset: Preset,
+    thermal: ThermalPreset,
+    seed: u64,
+) -> Result<SceneFile, SimError> {
     preset_scene_with(model, preset, thermal, Shapes::Simple, seed)
 }
 
 /// [`preset_scene`] with the objects' shapes drawn from `shapes`.
-pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: ThermalPreset, shapes: Shapes, seed: u64) -> Result<SceneFile, SimError> {
+pub fn preset_scene_with(
+    model: &BodyModel,
+    preset: Preset,
+    thermal: ThermalPreset,
+    shapes: Shapes,
+    seed: u64,
+) -> Result<SceneFile, SimError> {
     let mut scene = draw_scene(model, preset, thermal, shapes, seed, 0);
     for attempt in 1..ATTEMPTS {
         let mut probe = scene.clone();
@@ -55,7 +66,14 @@ pub fn preset_scene_with(model: &BodyModel, preset: Preset, thermal: ThermalPres
     Ok(scene)
 }
 
-fn draw_scene(model: &BodyModel, preset: Preset, thermal: ThermalPreset, shapes: Shapes, seed: u64, attempt: u64) -> SceneFile {
+fn draw_scene(
+    model: &BodyModel,
+    preset: Preset,
+    thermal: ThermalPreset,
+    shapes: Shapes,
+    seed: u64,
+    attempt: u64,
+) -> SceneFile {
     let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
     let phenotype = random_phenotype(&mut rng);
     let (name, rotvecs) = random_pose(model, &mut rng);

@@ -5,16 +5,16 @@
 //! before rendering.
 
 use crate::shapes::Shape;
-use irmirror_render::sdf::Sdf;
-use irmirror_sdf::{Category, FamilyShape};
-use std::sync::Arc;
 use irmirror_body::Phenotype;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_geom::transform::RigidFile;
 use irmirror_geom::{PinholeCamera, Rigid3};
+use irmirror_render::sdf::Sdf;
+use irmirror_sdf::{Category, FamilyShape};
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// A complete scene description (TOML or JSON).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -86,7 +86,10 @@ pub struct Table {
 /// tapered mugs with varied handles, flared bowls with feet, sedans to SUVs). In a scene file both
 /// are a table with a `category`; the parameter names tell them apart.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(untagged, expecting = "an object shape: `category` and its parameters (bowl: cut, wall; mug: aspect, wall; car: cabin, height; or the parameters of an irmirror_sdf::families shape)")]
+#[serde(
+    untagged,
+    expecting = "an object shape: `category` and its parameters (bowl: cut, wall; mug: aspect, wall; car: cabin, height; or the parameters of an irmirror_sdf::families shape)"
+)]
 pub enum ObjectShape {
     /// [`Shape`] (normalised to the unit sphere).
     Simple(Shape),
@@ -133,12 +136,17 @@ impl ObjectShape {
     /// radius; a car's length), drawn from the family's documented ranges; returns the shape and
     /// its `scale_m`. `None` for categories without a family (the sphere).
     pub fn family_like(&self, scale_m: f64, rng: &mut impl Rng) -> Option<(ObjectShape, f64)> {
-        let ObjectShape::Simple(simple) = *self else { return Some((*self, scale_m)) };
+        let ObjectShape::Simple(simple) = *self else {
+            return Some((*self, scale_m));
+        };
         // The simple shape's widest radius (or half length), metres.
         let (category, half_m) = match simple {
             Shape::Sphere => return None,
             Shape::Bowl { wall, .. } => (Category::Bowl, 0.95 * (1.0 + 0.5 * wall) * scale_m),
-            Shape::Mug { aspect, .. } => (Category::Mug, 0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2 * scale_m),
+            Shape::Mug { aspect, .. } => (
+                Category::Mug,
+                0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2 * scale_m,
+            ),
             Shape::Car { .. } => (Category::Car, 0.95 * scale_m),
         };
         let family = FamilyShape::sample(category, rng);
@@ -229,14 +237,32 @@ pub struct Sensor {
 
 impl Default for Sensor {
     fn default() -> Self {
-        Self { netd_mk: 50.0, blur_px: 0.5, supersample: 2, bits: 14, depth_noise_per_m2: 1.5e-3, depth_grazing_cos: 0.1, depth_edge_hole: 0.5, imu_up_noise_deg: 0.5 }
+        Self {
+            netd_mk: 50.0,
+            blur_px: 0.5,
+            supersample: 2,
+            bits: 14,
+            depth_noise_per_m2: 1.5e-3,
+            depth_grazing_cos: 0.1,
+            depth_edge_hole: 0.5,
+            imu_up_noise_deg: 0.5,
+        }
     }
 }
 
 impl Sensor {
     /// An ideal sensor (no noise, blur, dropouts; one ray per pixel) for tests.
     pub fn ideal() -> Self {
-        Self { netd_mk: 0.0, blur_px: 0.0, supersample: 1, bits: 16, depth_noise_per_m2: 0.0, depth_grazing_cos: 0.0, depth_edge_hole: 0.0, imu_up_noise_deg: 0.0 }
+        Self {
+            netd_mk: 0.0,
+            blur_px: 0.0,
+            supersample: 1,
+            bits: 16,
+            depth_noise_per_m2: 0.0,
+            depth_grazing_cos: 0.0,
+            depth_edge_hole: 0.0,
+            imu_up_noise_deg: 0.0,
+        }
     }
 }
 
@@ -266,18 +292,35 @@ pub fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Rigid3<f64> {
     let up = Vector3::z();
     let x = z.cross(&up).try_normalize(1e-9).unwrap_or_else(Vector3::x);
     let y = z.cross(&x);
-    Rigid3 { rotation: Matrix3::from_columns(&[x, y, z]), translation: eye }
+    Rigid3 {
+        rotation: Matrix3::from_columns(&[x, y, z]),
+        translation: eye,
+    }
 }
 
 fn small_baseline() -> RigidFile {
     // Thermal camera 4 cm to the right of the depth camera, parallel axes.
-    RigidFile::from_rigid(&Rigid3 { rotation: Matrix3::identity(), translation: Vector3::new(0.04, 0.0, 0.0) })
+    RigidFile::from_rigid(&Rigid3 {
+        rotation: Matrix3::identity(),
+        translation: Vector3::new(0.04, 0.0, 0.0),
+    })
 }
 
 /// The tabletop preset: 1–3 bowls and mugs on a table seen from above by the cameras, and a
 /// person 1–3 m away, usually outside both cameras' view.
-pub fn tabletop(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenotype, thermal: ThermalPreset) -> SceneFile {
-    let table = Table { height_m: 0.75, centre_m: [0.0, 0.0], size_m: [1.4, 0.9], temp_c: 22.0, emissivity: 0.93 };
+pub fn tabletop(
+    rng: &mut impl Rng,
+    pose: (String, Vec<[f64; 3]>),
+    phenotype: Phenotype,
+    thermal: ThermalPreset,
+) -> SceneFile {
+    let table = Table {
+        height_m: 0.75,
+        centre_m: [0.0, 0.0],
+        size_m: [1.4, 0.9],
+        temp_c: 22.0,
+        emissivity: 0.93,
+    };
     // Cameras 0.55 m above the table, 0.45 m back, looking at the table centre.
     let eye = Vector3::new(0.0, 0.45, 0.75 + 0.55);
     let world_from_depth = look_at(eye, Vector3::new(0.0, -0.05, 0.75));
@@ -286,29 +329,82 @@ pub fn tabletop(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Ph
     while objects.len() < n_objects {
         let bowl = rng.random_bool(0.5);
         let (shape, scale) = if bowl {
-            (Shape::Bowl { cut: rng.random_range(-0.2..0.05), wall: rng.random_range(0.04..0.08) }, rng.random_range(0.08..0.12))
+            (
+                Shape::Bowl {
+                    cut: rng.random_range(-0.2..0.05),
+                    wall: rng.random_range(0.04..0.08),
+                },
+                rng.random_range(0.08..0.12),
+            )
         } else {
-            (Shape::Mug { aspect: rng.random_range(0.9..1.3), wall: rng.random_range(0.08..0.14) }, rng.random_range(0.06..0.08))
+            (
+                Shape::Mug {
+                    aspect: rng.random_range(0.9..1.3),
+                    wall: rng.random_range(0.08..0.14),
+                },
+                rng.random_range(0.06..0.08),
+            )
         };
-        let base = [rng.random_range(-0.2..0.2), rng.random_range(-0.18..0.08), 0.75];
-        if objects.iter().any(|o| ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt() < o.scale_m + scale + 0.02) {
+        let base = [
+            rng.random_range(-0.2..0.2),
+            rng.random_range(-0.18..0.08),
+            0.75,
+        ];
+        if objects.iter().any(|o| {
+            ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt()
+                < o.scale_m + scale + 0.02
+        }) {
             continue;
         }
-        objects.push(SceneObject { shape: shape.into(), base_m: base, yaw_rad: rng.random_range(-3.1..3.1), scale_m: scale, emissivity: 0.91, temp_c: 22.0 });
+        objects.push(SceneObject {
+            shape: shape.into(),
+            base_m: base,
+            yaw_rad: rng.random_range(-3.1..3.1),
+            scale_m: scale,
+            emissivity: 0.91,
+            temp_c: 22.0,
+        });
     }
     // The person stands behind the cameras (so only reflections show them), 1–3 m from the table.
     let dist = rng.random_range(0.5..1.5);
     let angle: f64 = rng.random_range(-0.6..0.6);
     let position = [dist * angle.sin(), 0.45 + dist * angle.cos()];
     // Facing the table (towards −Y), give or take.
-    let person = Person { phenotype, rotvec_rad: pose.1, pose_name: pose.0, position_m: position, yaw_rad: rng.random_range(-0.4..0.4), skin_c: 34.0, clothing_c: 30.0 };
-    let third = look_at(Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4), Vector3::new(position[0], position[1], 0.9));
-    assemble(22.0, &world_from_depth, &third, thermal, Some(table), objects, person)
+    let person = Person {
+        phenotype,
+        rotvec_rad: pose.1,
+        pose_name: pose.0,
+        position_m: position,
+        yaw_rad: rng.random_range(-0.4..0.4),
+        skin_c: 34.0,
+        clothing_c: 30.0,
+    };
+    let third = look_at(
+        Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4),
+        Vector3::new(position[0], position[1], 0.9),
+    );
+    assemble(
+        22.0,
+        &world_from_depth,
+        &third,
+        thermal,
+        Some(table),
+        objects,
+        person,
+    )
 }
 
 /// A scene with the presets' cameras: a 320×240, 70° depth camera, the thermal camera 4 cm to
 /// its right, and a 320×240, 60° evaluation camera.
-fn assemble(ambient_c: f64, world_from_depth: &Rigid3<f64>, world_from_third: &Rigid3<f64>, thermal: ThermalPreset, table: Option<Table>, objects: Vec<SceneObject>, person: Person) -> SceneFile {
+fn assemble(
+    ambient_c: f64,
+    world_from_depth: &Rigid3<f64>,
+    world_from_third: &Rigid3<f64>,
+    thermal: ThermalPreset,
+    table: Option<Table>,
+    objects: Vec<SceneObject>,
+    person: Person,
+) -> SceneFile {
     let camera = |fov_deg: f64, pose: &Rigid3<f64>| PlacedCamera {
         intrinsics: PinholeCamera::from_fov(320, 240, fov_deg.to_radians()).expect("valid"),
         world_from_camera: RigidFile::from_rigid(pose),
@@ -316,7 +412,10 @@ fn assemble(ambient_c: f64, world_from_depth: &Rigid3<f64>, world_from_third: &R
     SceneFile {
         ambient_c,
         depth_camera: camera(70.0, world_from_depth),
-        thermal_camera: ThermalCamera { intrinsics: thermal.camera(), depth_from_thermal: small_baseline() },
+        thermal_camera: ThermalCamera {
+            intrinsics: thermal.camera(),
+            depth_from_thermal: small_baseline(),
+        },
         third_camera: camera(60.0, world_from_third),
         table,
         objects,
@@ -327,10 +426,19 @@ fn assemble(ambient_c: f64, world_from_depth: &Rigid3<f64>, world_from_third: &R
 }
 
 /// The car preset: the side of a car seen from 2–3 m, a pedestrian 2–8 m away from the car.
-pub fn car(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenotype, thermal: ThermalPreset) -> SceneFile {
+pub fn car(
+    rng: &mut impl Rng,
+    pose: (String, Vec<[f64; 3]>),
+    phenotype: Phenotype,
+    thermal: ThermalPreset,
+) -> SceneFile {
     let length = 4.5;
     let car = SceneObject {
-        shape: Shape::Car { cabin: rng.random_range(0.45..0.7), height: rng.random_range(0.28..0.36) }.into(),
+        shape: Shape::Car {
+            cabin: rng.random_range(0.45..0.7),
+            height: rng.random_range(0.28..0.36),
+        }
+        .into(),
         base_m: [0.0, 0.0, 0.0],
         yaw_rad: 0.0,
         scale_m: length / 1.9,
@@ -346,9 +454,28 @@ pub fn car(rng: &mut impl Rng, pose: (String, Vec<[f64; 3]>), phenotype: Phenoty
     let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     let lateral: f64 = side * rng.random_range(0.5..(0.4 * (dist + 0.6f64)).max(0.6));
     let position = [eye.x + lateral, -0.95 - dist];
-    let person = Person { phenotype, rotvec_rad: pose.1, pose_name: pose.0, position_m: position, yaw_rad: rng.random_range(-3.1..3.1), skin_c: 34.0, clothing_c: 28.0 };
-    let third = look_at(Vector3::new(position[0] + side * 3.0, position[1] - 2.0, 1.6), Vector3::new(position[0], position[1], 0.9));
-    assemble(18.0, &world_from_depth, &third, thermal, None, vec![car], person)
+    let person = Person {
+        phenotype,
+        rotvec_rad: pose.1,
+        pose_name: pose.0,
+        position_m: position,
+        yaw_rad: rng.random_range(-3.1..3.1),
+        skin_c: 34.0,
+        clothing_c: 28.0,
+    };
+    let third = look_at(
+        Vector3::new(position[0] + side * 3.0, position[1] - 2.0, 1.6),
+        Vector3::new(position[0], position[1], 0.9),
+    );
+    assemble(
+        18.0,
+        &world_from_depth,
+        &third,
+        thermal,
+        None,
+        vec![car],
+        person,
+    )
 }
 
 /// A rotation about world Z.

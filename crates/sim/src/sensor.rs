@@ -16,7 +16,12 @@ const BOUNCES: u32 = 3;
 
 /// Mean band radiance over `s × s` sub-pixel rays per pixel of `camera` (placed by
 /// `depth_from_camera`).
-pub fn thermal_radiance(world: &World, camera: &PinholeCamera, depth_from_camera: &Rigid3<f64>, supersample: u32) -> Image<f64> {
+pub fn thermal_radiance(
+    world: &World,
+    camera: &PinholeCamera,
+    depth_from_camera: &Rigid3<f64>,
+    supersample: u32,
+) -> Image<f64> {
     let s = supersample.max(1);
     let (w, h) = (camera.width, camera.height);
     let data = (0..w * h)
@@ -35,7 +40,11 @@ pub fn thermal_radiance(world: &World, camera: &PinholeCamera, depth_from_camera
             sum / f64::from(s * s)
         })
         .collect();
-    Image { width: w, height: h, data }
+    Image {
+        width: w,
+        height: h,
+        data,
+    }
 }
 
 /// Separable Gaussian blur with σ in pixels (edges clamped).
@@ -44,7 +53,9 @@ pub fn blur(img: &Image<f64>, sigma_px: f64) -> Image<f64> {
         return img.clone();
     }
     let r = (3.0 * sigma_px).ceil() as i64;
-    let k: Vec<f64> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma_px * sigma_px)).exp()).collect();
+    let k: Vec<f64> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma_px * sigma_px)).exp())
+        .collect();
     let ksum: f64 = k.iter().sum();
     let (w, h) = (img.width as i64, img.height as i64);
     let pass = |src: &[f64], horizontal: bool| -> Vec<f64> {
@@ -53,7 +64,11 @@ pub fn blur(img: &Image<f64>, sigma_px: f64) -> Image<f64> {
                 let (x, y) = (p % w, p / w);
                 (-r..=r)
                     .map(|i| {
-                        let (xx, yy) = if horizontal { ((x + i).clamp(0, w - 1), y) } else { (x, (y + i).clamp(0, h - 1)) };
+                        let (xx, yy) = if horizontal {
+                            ((x + i).clamp(0, w - 1), y)
+                        } else {
+                            (x, (y + i).clamp(0, h - 1))
+                        };
                         src[(yy * w + xx) as usize] * k[(i + r) as usize]
                     })
                     .sum::<f64>()
@@ -62,7 +77,11 @@ pub fn blur(img: &Image<f64>, sigma_px: f64) -> Image<f64> {
             .collect()
     };
     let tmp = pass(&img.data, true);
-    Image { width: img.width, height: img.height, data: pass(&tmp, false) }
+    Image {
+        width: img.width,
+        height: img.height,
+        data: pass(&tmp, false),
+    }
 }
 
 /// Linear radiometric calibration of the raw counts: `counts = gain · L + offset`, spanning
@@ -75,7 +94,12 @@ pub fn calibration(bits: u32) -> (f64, f64) {
 
 /// Blur, NETD noise (σ in kelvin, converted with dL/dT at the ambient radiance) and quantisation
 /// to `bits`-bit counts.
-pub fn thermal_counts(radiance: &Image<f64>, sensor: &Sensor, ambient_k: f64, rng: &mut impl Rng) -> Image<u16> {
+pub fn thermal_counts(
+    radiance: &Image<f64>,
+    sensor: &Sensor,
+    ambient_k: f64,
+    rng: &mut impl Rng,
+) -> Image<u16> {
     let blurred = blur(radiance, sensor.blur_px);
     let dl_dt = band_radiance(ambient_k + 0.5) - band_radiance(ambient_k - 0.5);
     let noise = Normal::new(0.0, (sensor.netd_mk * 1e-3 * dl_dt).max(1e-300)).expect("finite σ");
@@ -85,11 +109,19 @@ pub fn thermal_counts(radiance: &Image<f64>, sensor: &Sensor, ambient_k: f64, rn
         .data
         .iter()
         .map(|&l| {
-            let n = if sensor.netd_mk > 0.0 { noise.sample(rng) } else { 0.0 };
+            let n = if sensor.netd_mk > 0.0 {
+                noise.sample(rng)
+            } else {
+                0.0
+            };
             ((l + n) * gain + offset).round().clamp(0.0, max) as u16
         })
         .collect();
-    Image { width: radiance.width, height: radiance.height, data }
+    Image {
+        width: radiance.width,
+        height: radiance.height,
+        data,
+    }
 }
 
 /// Per depth-camera pixel: the nearest surface's depth along +Z (m), its incidence cosine, and
@@ -109,13 +141,23 @@ pub fn render_depth(world: &World, camera: &PinholeCamera) -> DepthRender {
         .into_par_iter()
         .map(|p| {
             let ray: Ray<f64> = camera.pixel_ray(p % camera.width, p / camera.width);
-            world.hit(&ray).map(|h| (h.t_m * ray.dir.z, h.normal.dot(&ray.dir).abs(), h.surface))
+            world
+                .hit(&ray)
+                .map(|h| (h.t_m * ray.dir.z, h.normal.dot(&ray.dir).abs(), h.surface))
         })
         .collect();
     let (w, h) = (camera.width, camera.height);
     DepthRender {
-        z_m: Image { width: w, height: h, data: hits.iter().map(|x| x.map_or(f64::NAN, |x| x.0)).collect() },
-        cos: Image { width: w, height: h, data: hits.iter().map(|x| x.map_or(0.0, |x| x.1)).collect() },
+        z_m: Image {
+            width: w,
+            height: h,
+            data: hits.iter().map(|x| x.map_or(f64::NAN, |x| x.0)).collect(),
+        },
+        cos: Image {
+            width: w,
+            height: h,
+            data: hits.iter().map(|x| x.map_or(0.0, |x| x.1)).collect(),
+        },
         surface: hits.iter().map(|x| x.map(|x| x.2)).collect(),
     }
 }
@@ -128,7 +170,10 @@ pub fn depth_counts(r: &DepthRender, sensor: &Sensor, rng: &mut impl Rng) -> Ima
     let mut out = Vec::with_capacity(z.len());
     for p in 0..(w * h) {
         let zi = z[p as usize];
-        if !zi.is_finite() || !(0.1..10.0).contains(&zi) || r.cos.data[p as usize] < sensor.depth_grazing_cos {
+        if !zi.is_finite()
+            || !(0.1..10.0).contains(&zi)
+            || r.cos.data[p as usize] < sensor.depth_grazing_cos
+        {
             out.push(0);
             continue;
         }
@@ -145,10 +190,18 @@ pub fn depth_counts(r: &DepthRender, sensor: &Sensor, rng: &mut impl Rng) -> Ima
             continue;
         }
         let sigma = sensor.depth_noise_per_m2 * zi * zi;
-        let noisy = if sigma > 0.0 { zi + Normal::new(0.0, sigma).expect("σ > 0").sample(rng) } else { zi };
+        let noisy = if sigma > 0.0 {
+            zi + Normal::new(0.0, sigma).expect("σ > 0").sample(rng)
+        } else {
+            zi
+        };
         out.push((noisy * 1000.0).round().clamp(1.0, 65535.0) as u16);
     }
-    Image { width: r.z_m.width, height: r.z_m.height, data: out }
+    Image {
+        width: r.z_m.width,
+        height: r.z_m.height,
+        data: out,
+    }
 }
 
 /// Simple shaded RGB (head-light Lambert) of the depth view.
@@ -167,10 +220,17 @@ pub fn shaded_rgb(world: &World, camera: &PinholeCamera) -> image::RgbImage {
                         Surface::Heat(_) => Vector3::new(0.9, 0.2, 0.1),
                     };
                     let shade = 0.25 + 0.75 * h.normal.dot(&ray.dir).abs();
-                    (albedo * shade * 255.0).map(|c| c.clamp(0.0, 255.0) as u8).into()
+                    (albedo * shade * 255.0)
+                        .map(|c| c.clamp(0.0, 255.0) as u8)
+                        .into()
                 }
             }
         })
         .collect();
-    image::RgbImage::from_raw(camera.width, camera.height, px.into_iter().flatten().collect()).expect("sizes match")
+    image::RgbImage::from_raw(
+        camera.width,
+        camera.height,
+        px.into_iter().flatten().collect(),
+    )
+    .expect("sizes match")
 }

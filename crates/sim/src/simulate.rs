@@ -1,13 +1,17 @@
 //! Rendering a scene into a capture directory.
 
-use crate::scene::SceneFile;
-use crate::sensor::{calibration, depth_counts, render_depth, shaded_rgb, thermal_counts, thermal_radiance};
-use crate::world::{PlacedBody, SURFACE_OFFSET_M, Surface, World, place_body};
 use crate::SimError;
+use crate::scene::SceneFile;
+use crate::sensor::{
+    calibration, depth_counts, render_depth, shaded_rgb, thermal_counts, thermal_radiance,
+};
+use crate::world::{PlacedBody, SURFACE_OFFSET_M, Surface, World, place_body};
 use irmirror_body::BodyModel;
-use irmirror_capture::format::{CaptureFile, DepthSpec, ObjectSpec, RgbSpec, ThermalCameraSpec, ThermalSpec, ThermalUnits};
+use irmirror_capture::format::{
+    CaptureFile, DepthSpec, ObjectSpec, RgbSpec, ThermalCameraSpec, ThermalSpec, ThermalUnits,
+};
 use irmirror_capture::planck::{ZERO_C_K, temperature_of};
-use irmirror_capture::{FORMAT, Image, write_gray16_png, write_gray8_png};
+use irmirror_capture::{FORMAT, Image, write_gray8_png, write_gray16_png};
 use irmirror_geom::transform::RigidFile;
 use irmirror_geom::{Ray, Rigid3, Similarity3, TriMesh};
 use irmirror_render::reflect::reflect;
@@ -64,55 +68,107 @@ pub struct Simulation {
 }
 
 fn rigid(f: &RigidFile, what: &str) -> Result<Rigid3<f64>, SimError> {
-    f.to_rigid().map_err(|e| SimError::Scene(format!("{what}: {e}")))
+    f.to_rigid()
+        .map_err(|e| SimError::Scene(format!("{what}: {e}")))
 }
 
 /// Thermal pixels whose pixel-centre ray reflects off an object onto the person (the truth
 /// reflection mask), and how many pixels see an object at all, and whether any sees the person
 /// directly.
-fn reflection_truth(world: &World, camera: &irmirror_geom::PinholeCamera, depth_from_thermal: &Rigid3<f64>) -> (Vec<bool>, usize, bool) {
+fn reflection_truth(
+    world: &World,
+    camera: &irmirror_geom::PinholeCamera,
+    depth_from_thermal: &Rigid3<f64>,
+) -> (Vec<bool>, usize, bool) {
     use rayon::prelude::*;
     let per_pixel: Vec<(bool, bool, bool)> = (0..camera.width * camera.height)
         .into_par_iter()
         .map(|p| {
-            let ray = depth_from_thermal.transform_ray(&camera.pixel_ray::<f64>(p % camera.width, p / camera.width));
+            let ray = depth_from_thermal
+                .transform_ray(&camera.pixel_ray::<f64>(p % camera.width, p / camera.width));
             match world.hit(&ray) {
                 Some(h) if matches!(h.surface, Surface::Object(_)) => {
-                    let r = Ray { origin: h.point + h.normal * SURFACE_OFFSET_M, dir: reflect(&ray.dir, &h.normal).normalize() };
-                    (matches!(world.hit(&r).map(|x| x.surface), Some(Surface::Person { .. })), true, false)
+                    let r = Ray {
+                        origin: h.point + h.normal * SURFACE_OFFSET_M,
+                        dir: reflect(&ray.dir, &h.normal).normalize(),
+                    };
+                    (
+                        matches!(
+                            world.hit(&r).map(|x| x.surface),
+                            Some(Surface::Person { .. })
+                        ),
+                        true,
+                        false,
+                    )
                 }
                 Some(h) => (false, false, matches!(h.surface, Surface::Person { .. })),
                 None => (false, false, false),
             }
         })
         .collect();
-    (per_pixel.iter().map(|x| x.0).collect(), per_pixel.iter().filter(|x| x.1).count(), per_pixel.iter().any(|x| x.2))
+    (
+        per_pixel.iter().map(|x| x.0).collect(),
+        per_pixel.iter().filter(|x| x.1).count(),
+        per_pixel.iter().any(|x| x.2),
+    )
 }
 
 /// How many thermal pixels show the person by reflection (cheap: no thermal rendering).
 pub fn reflection_pixels(model: &BodyModel, scene: &SceneFile) -> Result<usize, SimError> {
-    let depth_from_world = rigid(&scene.depth_camera.world_from_camera, "depth_camera.world_from_camera")?.inverse();
+    let depth_from_world = rigid(
+        &scene.depth_camera.world_from_camera,
+        "depth_camera.world_from_camera",
+    )?
+    .inverse();
     let body = place_body(model, scene, &depth_from_world)?;
     let with = World::new(model, scene, Some(&body))?;
-    let dft = rigid(&scene.thermal_camera.depth_from_thermal, "thermal_camera.depth_from_thermal")?;
-    Ok(reflection_truth(&with, &scene.thermal_camera.intrinsics, &dft).0.iter().filter(|&&m| m).count())
+    let dft = rigid(
+        &scene.thermal_camera.depth_from_thermal,
+        "thermal_camera.depth_from_thermal",
+    )?;
+    Ok(
+        reflection_truth(&with, &scene.thermal_camera.intrinsics, &dft)
+            .0
+            .iter()
+            .filter(|&&m| m)
+            .count(),
+    )
 }
 
 /// Renders `scene` (noise drawn from `seed`).
 pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simulation, SimError> {
-    for (name, cam) in [("depth_camera", &scene.depth_camera.intrinsics), ("thermal_camera", &scene.thermal_camera.intrinsics), ("third_camera", &scene.third_camera.intrinsics)] {
-        cam.validate().map_err(|e| SimError::Scene(format!("{name}: {e}")))?;
+    for (name, cam) in [
+        ("depth_camera", &scene.depth_camera.intrinsics),
+        ("thermal_camera", &scene.thermal_camera.intrinsics),
+        ("third_camera", &scene.third_camera.intrinsics),
+    ] {
+        cam.validate()
+            .map_err(|e| SimError::Scene(format!("{name}: {e}")))?;
     }
     if scene.objects.is_empty() {
-        return Err(SimError::Scene("objects: a capture needs at least one reflecting object".into()));
+        return Err(SimError::Scene(
+            "objects: a capture needs at least one reflecting object".into(),
+        ));
     }
     if scene.sensor.supersample == 0 || !(1..=16).contains(&scene.sensor.bits) {
-        return Err(SimError::Scene("sensor: supersample must be ≥ 1 and bits in 1..=16".into()));
+        return Err(SimError::Scene(
+            "sensor: supersample must be ≥ 1 and bits in 1..=16".into(),
+        ));
     }
-    let world_from_depth = rigid(&scene.depth_camera.world_from_camera, "depth_camera.world_from_camera")?;
+    let world_from_depth = rigid(
+        &scene.depth_camera.world_from_camera,
+        "depth_camera.world_from_camera",
+    )?;
     let depth_from_world = world_from_depth.inverse();
-    let depth_from_thermal = rigid(&scene.thermal_camera.depth_from_thermal, "thermal_camera.depth_from_thermal")?;
-    let depth_from_third = depth_from_world * rigid(&scene.third_camera.world_from_camera, "third_camera.world_from_camera")?;
+    let depth_from_thermal = rigid(
+        &scene.thermal_camera.depth_from_thermal,
+        "thermal_camera.depth_from_thermal",
+    )?;
+    let depth_from_third = depth_from_world
+        * rigid(
+            &scene.third_camera.world_from_camera,
+            "third_camera.world_from_camera",
+        )?;
     let body = place_body(model, scene, &depth_from_world)?;
     let with = World::new(model, scene, Some(&body))?;
     let without = World::new(model, scene, None)?;
@@ -134,15 +190,30 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         .filter(|(_, m)| **m)
         .map(|(p, _)| temperature_of(rad_with.data[p]) - temperature_of(rad_without.data[p]))
         .collect();
-    let reflection_mask = Image { width: tcam.width, height: tcam.height, data: mask };
+    let reflection_mask = Image {
+        width: tcam.width,
+        height: tcam.height,
+        data: mask,
+    };
 
     let dcam = scene.depth_camera.intrinsics;
     let dr = render_depth(&with, &dcam);
-    direct |= dr.surface.iter().any(|s| matches!(s, Some(Surface::Person { .. })));
+    direct |= dr
+        .surface
+        .iter()
+        .any(|s| matches!(s, Some(Surface::Person { .. })));
     let mut rng_d = irmirror_geom::rng::seeded(seed, 3);
     let depth = depth_counts(&dr, s, &mut rng_d);
     let masks = (0..scene.objects.len())
-        .map(|k| Image { width: dcam.width, height: dcam.height, data: dr.surface.iter().map(|s| *s == Some(Surface::Object(k))).collect() })
+        .map(|k| Image {
+            width: dcam.width,
+            height: dcam.height,
+            data: dr
+                .surface
+                .iter()
+                .map(|s| *s == Some(Surface::Object(k)))
+                .collect(),
+        })
         .collect();
     let rgb = shaded_rgb(&with, &dcam);
 
@@ -151,9 +222,16 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         .iter()
         .map(|o| {
             let r = o.sdf.bounding_radius() * 1.05;
-            let mut m = irmirror_geom::isosurface::isosurface(|p| o.sdf.distance(p), Vector3::repeat(-r), Vector3::repeat(r), 64);
+            let mut m = irmirror_geom::isosurface::isosurface(
+                |p| o.sdf.distance(p),
+                Vector3::repeat(-r),
+                Vector3::repeat(r),
+                64,
+            );
             m.map_vertices(|v| {
-                let p = o.depth_from_object.transform_point(&Vector3::from(v.map(f64::from)));
+                let p = o
+                    .depth_from_object
+                    .transform_point(&Vector3::from(v.map(f64::from)));
                 [p.x as f32, p.y as f32, p.z as f32]
             });
             m
@@ -167,7 +245,11 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         let sigma = s.imu_up_noise_deg.max(0.0).to_radians();
         let tilt = if sigma > 0.0 {
             let n = Normal::new(0.0, sigma).expect("σ > 0");
-            Vector3::new(n.sample(&mut rng_u), n.sample(&mut rng_u), n.sample(&mut rng_u))
+            Vector3::new(
+                n.sample(&mut rng_u),
+                n.sample(&mut rng_u),
+                n.sample(&mut rng_u),
+            )
         } else {
             Vector3::zeros()
         };
@@ -179,7 +261,9 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
     let third_img = {
         let px: Vec<u8> = (0..third_cam.width * third_cam.height)
             .flat_map(|p| {
-                let ray = depth_from_third.transform_ray(&third_cam.pixel_ray::<f64>(p % third_cam.width, p / third_cam.width));
+                let ray = depth_from_third.transform_ray(
+                    &third_cam.pixel_ray::<f64>(p % third_cam.width, p / third_cam.width),
+                );
                 let c: [u8; 3] = match with.hit(&ray) {
                     Some(h) if matches!(h.surface, Surface::Person { .. }) => {
                         let g = (60.0 + 190.0 * h.normal.dot(&ray.dir).abs()) as u8;
@@ -194,12 +278,20 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         image::RgbImage::from_raw(third_cam.width, third_cam.height, px).expect("sizes match")
     };
     let third_from_depth = depth_from_third.inverse();
-    let kp2d = body.keypoints.iter().map(|k| third_cam.project(&third_from_depth.transform_point(k))).collect();
+    let kp2d = body
+        .keypoints
+        .iter()
+        .map(|k| third_cam.project(&third_from_depth.transform_point(k)))
+        .collect();
 
     let report = SimReport {
         reflection_pixels: rises.len(),
         reflection_contrast_k: rises.iter().copied().fold(0.0, f64::max),
-        reflection_mean_rise_k: if rises.is_empty() { 0.0 } else { rises.iter().sum::<f64>() / rises.len() as f64 },
+        reflection_mean_rise_k: if rises.is_empty() {
+            0.0
+        } else {
+            rises.iter().sum::<f64>() / rises.len() as f64
+        },
         object_pixels,
         person_directly_visible: direct,
     };
@@ -224,14 +316,19 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
 impl Simulation {
     /// Writes the capture into `dir` (which must exist and be empty) with `truth/`.
     pub fn write(&self, model: &BodyModel, dir: &Path, seed: u64) -> Result<(), SimError> {
-        let werr = |p: &Path, e: String| SimError::Write { path: p.to_path_buf(), reason: e };
+        let werr = |p: &Path, e: String| SimError::Write {
+            path: p.to_path_buf(),
+            reason: e,
+        };
         let mk = |p: &Path| std::fs::create_dir_all(p).map_err(|e| werr(p, e.to_string()));
         mk(&dir.join("masks"))?;
         mk(&dir.join("truth/objects"))?;
         write_gray16_png(&self.depth, &dir.join("depth.png"))?;
         write_gray16_png(&self.thermal, &dir.join("thermal.png"))?;
         write_gray16_png(&self.background, &dir.join("thermal_background.png"))?;
-        self.rgb.save(dir.join("rgb.png")).map_err(|e| werr(&dir.join("rgb.png"), e.to_string()))?;
+        self.rgb
+            .save(dir.join("rgb.png"))
+            .map_err(|e| werr(&dir.join("rgb.png"), e.to_string()))?;
         let mut objects = Vec::new();
         for (k, (m, o)) in self.masks.iter().zip(&self.scene.objects).enumerate() {
             let mask = if m.data.iter().any(|&b| b) {
@@ -241,28 +338,51 @@ impl Simulation {
             } else {
                 None
             };
-            objects.push(ObjectSpec { category: o.shape.category().to_string(), mask });
+            objects.push(ObjectSpec {
+                category: o.shape.category().to_string(),
+                mask,
+            });
         }
         let (gain, offset) = calibration(self.scene.sensor.bits);
         let capture = CaptureFile {
             format: FORMAT.into(),
             depth_camera: self.scene.depth_camera.intrinsics,
-            depth: DepthSpec { file: "depth.png".into(), units_m: 0.001, up: Some(self.imu_up.into()) },
-            thermal_camera: ThermalCameraSpec { intrinsics: self.scene.thermal_camera.intrinsics, depth_from_thermal: self.scene.thermal_camera.depth_from_thermal.clone() },
-            thermal: ThermalSpec { file: "thermal.png".into(), units: ThermalUnits::CountsLinear { gain, offset }, background: vec!["thermal_background.png".into()] },
-            rgb: Some(RgbSpec { file: "rgb.png".into() }),
+            depth: DepthSpec {
+                file: "depth.png".into(),
+                units_m: 0.001,
+                up: Some(self.imu_up.into()),
+            },
+            thermal_camera: ThermalCameraSpec {
+                intrinsics: self.scene.thermal_camera.intrinsics,
+                depth_from_thermal: self.scene.thermal_camera.depth_from_thermal.clone(),
+            },
+            thermal: ThermalSpec {
+                file: "thermal.png".into(),
+                units: ThermalUnits::CountsLinear { gain, offset },
+                background: vec!["thermal_background.png".into()],
+            },
+            rgb: Some(RgbSpec {
+                file: "rgb.png".into(),
+            }),
             objects,
             extra_cameras: vec![],
-            description: format!("irmirror simulate, seed {seed}, irmirror {}", env!("CARGO_PKG_VERSION")),
+            description: format!(
+                "irmirror simulate, seed {seed}, irmirror {}",
+                env!("CARGO_PKG_VERSION")
+            ),
         };
         let toml_text = toml::to_string(&capture).map_err(|e| werr(dir, e.to_string()))?;
-        std::fs::write(dir.join("capture.toml"), toml_text).map_err(|e| werr(&dir.join("capture.toml"), e.to_string()))?;
+        std::fs::write(dir.join("capture.toml"), toml_text)
+            .map_err(|e| werr(&dir.join("capture.toml"), e.to_string()))?;
 
         // truth/
         let t = dir.join("truth");
         let scene_text = toml::to_string(&self.scene).map_err(|e| werr(&t, e.to_string()))?;
         std::fs::write(t.join("scene.toml"), scene_text).map_err(|e| werr(&t, e.to_string()))?;
-        self.body.mesh.write(&t.join("body.ply")).map_err(|e| werr(&t, e.to_string()))?;
+        self.body
+            .mesh
+            .write(&t.join("body.ply"))
+            .map_err(|e| werr(&t, e.to_string()))?;
         let v3 = |v: &Vector3<f64>| [v.x, v.y, v.z];
         let body_json = serde_json::json!({
             "frame": "depth camera (OpenCV axes), metres",
@@ -278,8 +398,14 @@ impl Simulation {
         let js = |v: &serde_json::Value| serde_json::to_string_pretty(v).expect("json serialises");
         std::fs::write(t.join("body.json"), js(&body_json)).map_err(|e| werr(&t, e.to_string()))?;
         let mut objs = Vec::new();
-        for (k, (m, pose)) in self.object_meshes.iter().zip(&self.object_poses).enumerate() {
-            m.write(&t.join(format!("objects/object_{k}.ply"))).map_err(|e| werr(&t, e.to_string()))?;
+        for (k, (m, pose)) in self
+            .object_meshes
+            .iter()
+            .zip(&self.object_poses)
+            .enumerate()
+        {
+            m.write(&t.join(format!("objects/object_{k}.ply")))
+                .map_err(|e| werr(&t, e.to_string()))?;
             let o = &self.scene.objects[k];
             objs.push(serde_json::json!({
                 "shape": o.shape, "emissivity": o.emissivity, "temp_c": o.temp_c,
@@ -288,7 +414,8 @@ impl Simulation {
                 "mesh": format!("objects/object_{k}.ply"),
             }));
         }
-        std::fs::write(t.join("objects.json"), js(&serde_json::json!(objs))).map_err(|e| werr(&t, e.to_string()))?;
+        std::fs::write(t.join("objects.json"), js(&serde_json::json!(objs)))
+            .map_err(|e| werr(&t, e.to_string()))?;
         let third = serde_json::json!({
             "intrinsics": self.scene.third_camera.intrinsics,
             "world_from_camera": self.scene.third_camera.world_from_camera,
@@ -296,22 +423,44 @@ impl Simulation {
             "keypoints_px": model.asset.meta.keypoint_labels.iter().zip(&self.third_view.1).map(|(n, p)| (n.clone(), serde_json::json!(p.map(|(u, v)| [u, v])))).collect::<serde_json::Map<_, _>>(),
             "image": "third_view.png",
         });
-        std::fs::write(t.join("third_camera.json"), js(&third)).map_err(|e| werr(&t, e.to_string()))?;
-        self.third_view.0.save(t.join("third_view.png")).map_err(|e| werr(&t, e.to_string()))?;
-        write_gray8_png(&self.reflection_mask.map(|b| if b { 255 } else { 0 }), &t.join("reflection_mask.png"))?;
-        std::fs::write(t.join("stats.json"), js(&serde_json::json!(self.report))).map_err(|e| werr(&t, e.to_string()))?;
+        std::fs::write(t.join("third_camera.json"), js(&third))
+            .map_err(|e| werr(&t, e.to_string()))?;
+        self.third_view
+            .0
+            .save(t.join("third_view.png"))
+            .map_err(|e| werr(&t, e.to_string()))?;
+        write_gray8_png(
+            &self.reflection_mask.map(|b| if b { 255 } else { 0 }),
+            &t.join("reflection_mask.png"),
+        )?;
+        std::fs::write(t.join("stats.json"), js(&serde_json::json!(self.report)))
+            .map_err(|e| werr(&t, e.to_string()))?;
 
         // preview/: images for people (not part of the format; the loader ignores them).
         let pv = dir.join("preview");
         mk(&pv)?;
         let (rw, rb) = &self.radiance;
         let tk = rw.map(temperature_of);
-        let (lo, hi) = tk.data.iter().fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
-        let stretch = |v: f64, lo: f64, hi: f64| ((v - lo) / (hi - lo).max(1e-9) * 255.0).clamp(0.0, 255.0) as u8;
+        let (lo, hi) = tk
+            .data
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let stretch = |v: f64, lo: f64, hi: f64| {
+            ((v - lo) / (hi - lo).max(1e-9) * 255.0).clamp(0.0, 255.0) as u8
+        };
         write_gray8_png(&tk.map(|v| stretch(v, lo, hi)), &pv.join("thermal.png"))?;
-        let rise: Vec<f64> = rw.data.iter().zip(&rb.data).map(|(a, b)| temperature_of(*a) - temperature_of(*b)).collect();
+        let rise: Vec<f64> = rw
+            .data
+            .iter()
+            .zip(&rb.data)
+            .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
+            .collect();
         let max_rise = rise.iter().copied().fold(0.0, f64::max);
-        let rise_img = Image { width: rw.width, height: rw.height, data: rise.iter().map(|&v| stretch(v, 0.0, max_rise)).collect() };
+        let rise_img = Image {
+            width: rw.width,
+            height: rw.height,
+            data: rise.iter().map(|&v| stretch(v, 0.0, max_rise)).collect(),
+        };
         write_gray8_png(&rise_img, &pv.join("person_minus_background.png"))?;
         Ok(())
     }

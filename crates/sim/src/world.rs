@@ -93,7 +93,20 @@ const SKIN_EMISSIVITY: f64 = 0.98;
 /// Clothing (cotton) emissivity.
 const CLOTHING_EMISSIVITY: f64 = 0.95;
 /// Bones whose dominant triangles are exposed skin.
-const SKIN_BONES: [&str; 12] = ["head", "neck01", "neck02", "neck03", "wrist.L", "wrist.R", "lowerarm01.L", "lowerarm02.L", "lowerarm01.R", "lowerarm02.R", "foot.L", "foot.R"];
+const SKIN_BONES: [&str; 12] = [
+    "head",
+    "neck01",
+    "neck02",
+    "neck03",
+    "wrist.L",
+    "wrist.R",
+    "lowerarm01.L",
+    "lowerarm02.L",
+    "lowerarm01.R",
+    "lowerarm02.R",
+    "foot.L",
+    "foot.R",
+];
 
 /// The posed body of a scene in the world frame, with per-vertex dominant bone.
 pub struct PlacedBody {
@@ -112,19 +125,34 @@ pub struct PlacedBody {
 }
 
 /// Poses the scene's person and places them in the depth frame.
-pub fn place_body(model: &BodyModel, scene: &SceneFile, depth_from_world: &Rigid3<f64>) -> Result<PlacedBody, SimError> {
+pub fn place_body(
+    model: &BodyModel,
+    scene: &SceneFile,
+    depth_from_world: &Rigid3<f64>,
+) -> Result<PlacedBody, SimError> {
     let p = &scene.person;
     let z = model.shape_coefficients(&p.phenotype)?;
     let shaped = model.shaped::<f64>(&z)?;
     let pose = Pose::from_axis_angles(&p.rotvec_rad, shaped.joint_heads[0]);
     let posed = model.pose(&shaped, &pose)?;
-    let floor = posed.vertices.iter().map(|v| v.z).fold(f64::INFINITY, f64::min);
+    let floor = posed
+        .vertices
+        .iter()
+        .map(|v| v.z)
+        .fold(f64::INFINITY, f64::min);
     // Stand on the floor at (x, y), turned by yaw about world Z (Anny is Z up like the world).
-    let world_from_anny = Rigid3 { rotation: yaw(p.yaw_rad), translation: Vector3::new(p.position_m[0], p.position_m[1], -floor) };
+    let world_from_anny = Rigid3 {
+        rotation: yaw(p.yaw_rad),
+        translation: Vector3::new(p.position_m[0], p.position_m[1], -floor),
+    };
     let depth_from_anny = *depth_from_world * world_from_anny;
     let to_depth = |v: &Vector3<f64>| depth_from_anny.transform_point(v);
     let mut mesh = model.mesh(&posed);
-    mesh.vertices = posed.vertices.iter().map(|v| to_depth(v).map(|x| x as f32).into()).collect();
+    mesh.vertices = posed
+        .vertices
+        .iter()
+        .map(|v| to_depth(v).map(|x| x as f32).into())
+        .collect();
     Ok(PlacedBody {
         mesh,
         joints: posed.joints.iter().map(to_depth).collect(),
@@ -138,8 +166,16 @@ pub fn place_body(model: &BodyModel, scene: &SceneFile, depth_from_world: &Rigid
 impl World {
     /// Builds the world of `scene`; `with_person = false` leaves the person out (background
     /// frames).
-    pub fn new(model: &BodyModel, scene: &SceneFile, body: Option<&PlacedBody>) -> Result<Self, SimError> {
-        let world_from_depth = scene.depth_camera.world_from_camera.to_rigid().map_err(|e| SimError::Scene(format!("depth_camera.world_from_camera: {e}")))?;
+    pub fn new(
+        model: &BodyModel,
+        scene: &SceneFile,
+        body: Option<&PlacedBody>,
+    ) -> Result<Self, SimError> {
+        let world_from_depth = scene
+            .depth_camera
+            .world_from_camera
+            .to_rigid()
+            .map_err(|e| SimError::Scene(format!("depth_camera.world_from_camera: {e}")))?;
         let depth_from_world = world_from_depth.inverse();
         let mut objects = Vec::new();
         let mut object_radiometry = Vec::new();
@@ -147,24 +183,60 @@ impl World {
         let up = axis_angle_to_matrix(&Vector3::new(std::f64::consts::FRAC_PI_2, 0.0, 0.0));
         for (k, o) in scene.objects.iter().enumerate() {
             if !(o.scale_m > 0.0 && (0.0..=1.0).contains(&o.emissivity)) {
-                return Err(SimError::Scene(format!("objects[{k}]: scale must be positive and emissivity in [0, 1]")));
+                return Err(SimError::Scene(format!(
+                    "objects[{k}]: scale must be positive and emissivity in [0, 1]"
+                )));
             }
             let rot = yaw(o.yaw_rad) * up;
             let base = Vector3::from(o.base_m);
-            let world_from_object = Similarity3::new(rot, base - rot * Vector3::new(0.0, o.shape.base_y(), 0.0) * o.scale_m, o.scale_m)
-                .map_err(|e| SimError::Scene(format!("objects[{k}]: {e}")))?;
-            let depth_from_object = Similarity3 { rotation: depth_from_world.rotation, translation: depth_from_world.translation, scale: 1.0 } * world_from_object;
-            objects.push(PlacedSdf { sdf: o.shape.sdf(), depth_from_object });
-            object_radiometry.push(ObjectRadiometry { emissivity: o.emissivity, emitted: band_radiance(o.temp_c + ZERO_C_K) });
+            let world_from_object = Similarity3::new(
+                rot,
+                base - rot * Vector3::new(0.0, o.shape.base_y(), 0.0) * o.scale_m,
+                o.scale_m,
+            )
+            .map_err(|e| SimError::Scene(format!("objects[{k}]: {e}")))?;
+            let depth_from_object = Similarity3 {
+                rotation: depth_from_world.rotation,
+                translation: depth_from_world.translation,
+                scale: 1.0,
+            } * world_from_object;
+            objects.push(PlacedSdf {
+                sdf: o.shape.sdf(),
+                depth_from_object,
+            });
+            object_radiometry.push(ObjectRadiometry {
+                emissivity: o.emissivity,
+                emitted: band_radiance(o.temp_c + ZERO_C_K),
+            });
         }
         let (body_mesh, body_vertices, body_bvh, body_skin) = match body {
             Some(b) => {
-                let v: Vec<Vector3<f64>> = b.mesh.vertices.iter().map(|p| Vector3::from(p.map(f64::from))).collect();
+                let v: Vec<Vector3<f64>> = b
+                    .mesh
+                    .vertices
+                    .iter()
+                    .map(|p| Vector3::from(p.map(f64::from)))
+                    .collect();
                 let bvh = Bvh::build(&v, &b.mesh.triangles);
-                let skin_bones: Vec<usize> = SKIN_BONES.iter().filter_map(|n| model.joint_index(n)).collect();
+                let skin_bones: Vec<usize> = SKIN_BONES
+                    .iter()
+                    .filter_map(|n| model.joint_index(n))
+                    .collect();
                 let k = model.asset.influences;
-                let dominant: Vec<usize> = (0..model.n_vertices()).map(|i| model.asset.skin_indices[i * k] as usize).collect();
-                let skin = b.mesh.triangles.iter().map(|t| t.iter().filter(|&&v| skin_bones.contains(&dominant[v as usize])).count() >= 2).collect();
+                let dominant: Vec<usize> = (0..model.n_vertices())
+                    .map(|i| model.asset.skin_indices[i * k] as usize)
+                    .collect();
+                let skin = b
+                    .mesh
+                    .triangles
+                    .iter()
+                    .map(|t| {
+                        t.iter()
+                            .filter(|&&v| skin_bones.contains(&dominant[v as usize]))
+                            .count()
+                            >= 2
+                    })
+                    .collect();
                 (b.mesh.clone(), v, bvh, skin)
             }
             None => (TriMesh::default(), vec![], Bvh::build(&[], &[]), vec![]),
@@ -186,11 +258,25 @@ impl World {
             body_bvh,
             body_skin,
             table,
-            heat: scene.heat_sources.iter().map(|h| (depth_from_world.transform_point(&Vector3::from(h.centre_m)), h.radius_m, band_radiance(h.temp_c + ZERO_C_K))).collect(),
+            heat: scene
+                .heat_sources
+                .iter()
+                .map(|h| {
+                    (
+                        depth_from_world.transform_point(&Vector3::from(h.centre_m)),
+                        h.radius_m,
+                        band_radiance(h.temp_c + ZERO_C_K),
+                    )
+                })
+                .collect(),
             ambient: band_radiance(scene.ambient_c + ZERO_C_K),
             skin: (SKIN_EMISSIVITY, band_radiance(p.skin_c + ZERO_C_K)),
             clothing: (CLOTHING_EMISSIVITY, band_radiance(p.clothing_c + ZERO_C_K)),
-            trace_params: TraceParams { coarse_tol_rel: 1e-5, method: SurfaceMethod::SphereTrace { steps: 3 }, max_iters: 2048 },
+            trace_params: TraceParams {
+                coarse_tol_rel: 1e-5,
+                method: SurfaceMethod::SphereTrace { steps: 3 },
+                max_iters: 2048,
+            },
         })
     }
 
@@ -205,18 +291,43 @@ impl World {
         for (k, o) in self.objects.iter().enumerate() {
             if let Some(h) = trace(o, ray, &self.trace_params) {
                 let t = (h.point - ray.origin).dot(&ray.dir);
-                consider(Hit { t_m: t, surface: Surface::Object(k), point: h.point, normal: h.normal });
+                consider(Hit {
+                    t_m: t,
+                    surface: Surface::Object(k),
+                    point: h.point,
+                    normal: h.normal,
+                });
             }
         }
-        if let Some((t, tri)) = first_hit(&self.body_bvh, &self.body_vertices, &self.body.triangles, &ray.origin, &ray.dir) {
-            let [a, b, c] = self.body.triangles[tri as usize].map(|v| self.body_vertices[v as usize]);
+        if let Some((t, tri)) = first_hit(
+            &self.body_bvh,
+            &self.body_vertices,
+            &self.body.triangles,
+            &ray.origin,
+            &ray.dir,
+        ) {
+            let [a, b, c] =
+                self.body.triangles[tri as usize].map(|v| self.body_vertices[v as usize]);
             let mut n = (b - a).cross(&(c - a)).normalize();
             if n.dot(&ray.dir) > 0.0 {
                 n = -n;
             }
-            consider(Hit { t_m: t, surface: Surface::Person { skin: self.body_skin[tri as usize] }, point: ray.at(t), normal: n });
+            consider(Hit {
+                t_m: t,
+                surface: Surface::Person {
+                    skin: self.body_skin[tri as usize],
+                },
+                point: ray.at(t),
+                normal: n,
+            });
         }
-        if let Some(TableTop { height_m: h, centre_m: c, half_size_m: half, .. }) = self.table {
+        if let Some(TableTop {
+            height_m: h,
+            centre_m: c,
+            half_size_m: half,
+            ..
+        }) = self.table
+        {
             let o = self.world_from_depth.transform_point(&ray.origin);
             let d = self.world_from_depth.transform_vector(&ray.dir);
             if d.z.abs() > 1e-12 {
@@ -224,7 +335,12 @@ impl World {
                 let p = o + d * t;
                 if t > 0.0 && (p.x - c[0]).abs() <= half[0] && (p.y - c[1]).abs() <= half[1] {
                     let up = self.world_from_depth.rotation.tr_mul(&Vector3::z());
-                    consider(Hit { t_m: t, surface: Surface::Table, point: ray.at(t), normal: if up.dot(&ray.dir) < 0.0 { up } else { -up } });
+                    consider(Hit {
+                        t_m: t,
+                        surface: Surface::Table,
+                        point: ray.at(t),
+                        normal: if up.dot(&ray.dir) < 0.0 { up } else { -up },
+                    });
                 }
             }
         }
@@ -235,7 +351,12 @@ impl World {
             if disc >= 0.0 {
                 let t = -b - disc.sqrt();
                 let p = ray.at(t);
-                consider(Hit { t_m: t, surface: Surface::Heat(k), point: p, normal: (p - c) / *r });
+                consider(Hit {
+                    t_m: t,
+                    surface: Surface::Heat(k),
+                    point: p,
+                    normal: (p - c) / *r,
+                });
             }
         }
         best
@@ -244,14 +365,22 @@ impl World {
     /// Band radiance arriving along `ray` (W m⁻² sr⁻¹): emission plus mirror reflection for the
     /// objects (`bounces` deep), emission plus the room's reflection for diffuse surfaces.
     pub fn radiance(&self, ray: &Ray<f64>, bounces: u32) -> f64 {
-        let Some(h) = self.hit(ray) else { return self.ambient };
+        let Some(h) = self.hit(ray) else {
+            return self.ambient;
+        };
         let grey = |(e, l): (f64, f64)| e * l + (1.0 - e) * self.ambient;
         match h.surface {
             Surface::Object(k) => {
                 let r = &self.object_radiometry[k];
                 let reflected = if bounces > 0 {
                     let dir = reflect(&ray.dir, &h.normal).normalize();
-                    self.radiance(&Ray { origin: h.point + h.normal * SURFACE_OFFSET_M, dir }, bounces - 1)
+                    self.radiance(
+                        &Ray {
+                            origin: h.point + h.normal * SURFACE_OFFSET_M,
+                            dir,
+                        },
+                        bounces - 1,
+                    )
                 } else {
                     self.ambient
                 };

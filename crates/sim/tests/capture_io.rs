@@ -37,13 +37,21 @@ fn loader_round_trips_the_simulator() {
     let before = listing(&dir);
     let sim = simulate(model(), &small_scene(), 1).unwrap();
     let cap = Capture::load(&dir).unwrap();
-    assert_eq!(listing(&dir), before, "loading modified the capture directory");
+    assert_eq!(
+        listing(&dir),
+        before,
+        "loading modified the capture directory"
+    );
     assert_eq!(cap.objects.len(), 2);
     assert_eq!(cap.objects[0].category, "bowl");
     assert_eq!(cap.thermal_background_k.len(), 1);
     // Ideal sensor: the loaded temperatures equal the rendered ones up to the 16-bit ADC step.
     for (k, l) in cap.thermal_k.data.iter().zip(&sim.radiance.0.data) {
-        assert!((k - temperature_of(*l)).abs() < 0.01, "{k} vs {}", temperature_of(*l));
+        assert!(
+            (k - temperature_of(*l)).abs() < 0.01,
+            "{k} vs {}",
+            temperature_of(*l)
+        );
     }
     for (d, raw) in cap.depth_m.data.iter().zip(&sim.depth.data) {
         if *raw == 0 {
@@ -52,21 +60,52 @@ fn loader_round_trips_the_simulator() {
             assert!((f64::from(*d) - f64::from(*raw) * 1e-3).abs() < 1e-6);
         }
     }
-    assert_eq!(cap.objects[0].mask.as_ref().unwrap().data, sim.masks[0].data);
+    assert_eq!(
+        cap.objects[0].mask.as_ref().unwrap().data,
+        sim.masks[0].data
+    );
 
     // The same frame as centikelvin in a 16-bit TIFF, and as raw counts with Planck constants.
-    let ck: Vec<u16> = cap.thermal_k.data.iter().map(|k| (k * 100.0).round() as u16).collect();
+    let ck: Vec<u16> = cap
+        .thermal_k
+        .data
+        .iter()
+        .map(|k| (k * 100.0).round() as u16)
+        .collect();
     let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(160, 120, ck).unwrap();
     img.save(dir.join("thermal_ck.tiff")).unwrap();
     let (r, b, f, o) = (300_000.0, 1400.0, 1.0, 100.0);
-    let raw: Vec<u16> = cap.thermal_k.data.iter().map(|t| (r / ((b / t).exp() - f) + o).round() as u16).collect();
-    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(160, 120, raw).unwrap().save(dir.join("thermal_raw.png")).unwrap();
-    for (file, units) in [("thermal_ck.tiff", "kind = \"centikelvin\""), ("thermal_raw.png", "kind = \"counts-planck\"\nr = 300000.0\nb = 1400.0\nf = 1.0\no = 100.0")] {
+    let raw: Vec<u16> = cap
+        .thermal_k
+        .data
+        .iter()
+        .map(|t| (r / ((b / t).exp() - f) + o).round() as u16)
+        .collect();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(160, 120, raw)
+        .unwrap()
+        .save(dir.join("thermal_raw.png"))
+        .unwrap();
+    for (file, units) in [
+        ("thermal_ck.tiff", "kind = \"centikelvin\""),
+        (
+            "thermal_raw.png",
+            "kind = \"counts-planck\"\nr = 300000.0\nb = 1400.0\nf = 1.0\no = 100.0",
+        ),
+    ] {
         let t = std::fs::read_to_string(dir.join("capture.toml")).unwrap();
-        let head = t.split("[thermal.units]").next().unwrap().replace("file = \"thermal.png\"", &format!("file = \"{file}\"")).replace("background = [\"thermal_background.png\"]", "");
+        let head = t
+            .split("[thermal.units]")
+            .next()
+            .unwrap()
+            .replace("file = \"thermal.png\"", &format!("file = \"{file}\""))
+            .replace("background = [\"thermal_background.png\"]", "");
         let rest = t.split("[thermal.units]").nth(1).unwrap();
         let after = &rest[rest.find("\n[").unwrap()..];
-        std::fs::write(dir.join("capture.toml"), format!("{head}[thermal.units]\n{units}\n{after}")).unwrap();
+        std::fs::write(
+            dir.join("capture.toml"),
+            format!("{head}[thermal.units]\n{units}\n{after}"),
+        )
+        .unwrap();
         let c2 = Capture::load(&dir).unwrap();
         for (a, b) in c2.thermal_k.data.iter().zip(&cap.thermal_k.data) {
             assert!((a - b).abs() < 0.02, "{file}: {a} vs {b}");
@@ -91,7 +130,8 @@ fn write_npy_f64(path: &Path, h: usize, w: usize, data: &[f64]) {
     let mut b = b"\x93NUMPY\x01\x00".to_vec();
     b.extend_from_slice(&(header.len() as u16).to_le_bytes());
     b.extend_from_slice(header.as_bytes());
-    data.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    data.iter()
+        .for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
     std::fs::write(path, b).unwrap();
 }
 
@@ -100,38 +140,198 @@ fn broken_captures_give_clear_errors() {
     let base = write_capture("broken-base");
     type Breaker = Box<dyn Fn(&Path)>;
     let cases: Vec<(&str, Breaker, &str)> = vec![
-        ("no capture.toml", Box::new(|d| std::fs::remove_file(d.join("capture.toml")).unwrap()), "capture directory"),
-        ("toml syntax", Box::new(|d| std::fs::write(d.join("capture.toml"), "format = [").unwrap()), "capture.toml"),
-        ("unknown key", Box::new(|d| edit_toml(d, |t| format!("colour = 3\n{t}"))), "unknown field"),
-        ("missing field", Box::new(|d| edit_toml(d, |t| t.replacen("fx = ", "fx_typo = ", 1))), "fx"),
-        ("format tag", Box::new(|d| edit_toml(d, |t| t.replace("irmirror-capture-1", "irmirror-capture-9"))), "format"),
-        ("negative focal length", Box::new(|d| edit_toml(d, |t| t.replacen("fx = ", "fx = -", 1))), "focal lengths must be positive"),
-        ("principal point", Box::new(|d| edit_toml(d, |t| t.replacen("cx = ", "cx = 9", 1))), "principal point"),
-        ("not a rotation", Box::new(|d| edit_toml(d, |t| t.replace("rotation = [[1.0, 0.0, 0.0]", "rotation = [[2.0, 0.0, 0.0]"))), "not a rotation"),
-        ("depth missing", Box::new(|d| std::fs::remove_file(d.join("depth.png")).unwrap()), "depth.png"),
-        ("depth truncated", Box::new(|d| { let b = std::fs::read(d.join("depth.png")).unwrap(); std::fs::write(d.join("depth.png"), &b[..b.len() / 2]).unwrap(); }), "cannot decode"),
-        ("8-bit depth", Box::new(|d| image::GrayImage::new(80, 60).save(d.join("depth.png")).unwrap()), "16-bit"),
-        ("depth size", Box::new(|d| image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(10, 10, image::Luma([900])).save(d.join("depth.png")).unwrap()), "is 10×10"),
-        ("depth all zero", Box::new(|d| image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(80, 60).save(d.join("depth.png")).unwrap()), "no valid pixel"),
-        ("thermal size", Box::new(|d| image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(80, 60, image::Luma([5000])).save(d.join("thermal.png")).unwrap()), "thermal camera"),
-        ("NaN in .npy", Box::new(|d| {
-            let mut v = vec![295.0; 160 * 120];
-            v[100] = f64::NAN;
-            write_npy_f64(&d.join("thermal.npy"), 120, 160, &v);
-            edit_toml(d, |t| t.replace("file = \"thermal.png\"", "file = \"thermal.npy\"").replace("background = [\"thermal_background.png\"]", "").replace("kind = \"counts-linear\"", "kind = \"kelvin\"").lines().filter(|l| !l.starts_with("gain") && !l.starts_with("offset")).collect::<Vec<_>>().join("\n"));
-        }), "not finite"),
-        ("°C read as kelvin", Box::new(|d| {
-            write_npy_f64(&d.join("thermal.npy"), 120, 160, &vec![22.0; 160 * 120]);
-            edit_toml(d, |t| t.replace("file = \"thermal.png\"", "file = \"thermal.npy\"").replace("background = [\"thermal_background.png\"]", "").replace("kind = \"counts-linear\"", "kind = \"kelvin\"").lines().filter(|l| !l.starts_with("gain") && !l.starts_with("offset")).collect::<Vec<_>>().join("\n"));
-        }), "check `thermal.units`"),
-        ("empty mask", Box::new(|d| image::GrayImage::new(80, 60).save(d.join("masks/object_0.png")).unwrap()), "empty"),
-        ("mask outside the capture", Box::new(|d| edit_toml(d, |t| t.replace("masks/object_0.png", "../object_0.png"))), "inside the capture directory"),
-        ("zero depth units", Box::new(|d| edit_toml(d, |t| t.replace("units_m = 0.001", "units_m = 0.0"))), "units_m"),
-        ("zero IMU up", Box::new(|d| edit_toml(d, |t| t.lines().map(|l| if l.starts_with("up = ") { "up = [0.0, 0.0, 0.0]" } else { l }).collect::<Vec<_>>().join("\n"))), "depth.up"),
-        ("negative gain", Box::new(|d| edit_toml(d, |t| t.replacen("gain = ", "gain = -", 1))), "gain"),
-        ("no objects", Box::new(|d| edit_toml(d, |t| t.split("[[object]]").next().unwrap().to_string())), "no objects"),
-        ("background missing", Box::new(|d| std::fs::remove_file(d.join("thermal_background.png")).unwrap()), "thermal_background.png"),
-        ("rgb wrong size", Box::new(|d| image::RgbImage::new(5, 5).save(d.join("rgb.png")).unwrap()), "rgb.png"),
+        (
+            "no capture.toml",
+            Box::new(|d| std::fs::remove_file(d.join("capture.toml")).unwrap()),
+            "capture directory",
+        ),
+        (
+            "toml syntax",
+            Box::new(|d| std::fs::write(d.join("capture.toml"), "format = [").unwrap()),
+            "capture.toml",
+        ),
+        (
+            "unknown key",
+            Box::new(|d| edit_toml(d, |t| format!("colour = 3\n{t}"))),
+            "unknown field",
+        ),
+        (
+            "missing field",
+            Box::new(|d| edit_toml(d, |t| t.replacen("fx = ", "fx_typo = ", 1))),
+            "fx",
+        ),
+        (
+            "format tag",
+            Box::new(|d| edit_toml(d, |t| t.replace("irmirror-capture-1", "irmirror-capture-9"))),
+            "format",
+        ),
+        (
+            "negative focal length",
+            Box::new(|d| edit_toml(d, |t| t.replacen("fx = ", "fx = -", 1))),
+            "focal lengths must be positive",
+        ),
+        (
+            "principal point",
+            Box::new(|d| edit_toml(d, |t| t.replacen("cx = ", "cx = 9", 1))),
+            "principal point",
+        ),
+        (
+            "not a rotation",
+            Box::new(|d| {
+                edit_toml(d, |t| {
+                    t.replace("rotation = [[1.0, 0.0, 0.0]", "rotation = [[2.0, 0.0, 0.0]")
+                })
+            }),
+            "not a rotation",
+        ),
+        (
+            "depth missing",
+            Box::new(|d| std::fs::remove_file(d.join("depth.png")).unwrap()),
+            "depth.png",
+        ),
+        (
+            "depth truncated",
+            Box::new(|d| {
+                let b = std::fs::read(d.join("depth.png")).unwrap();
+                std::fs::write(d.join("depth.png"), &b[..b.len() / 2]).unwrap();
+            }),
+            "cannot decode",
+        ),
+        (
+            "8-bit depth",
+            Box::new(|d| {
+                image::GrayImage::new(80, 60)
+                    .save(d.join("depth.png"))
+                    .unwrap()
+            }),
+            "16-bit",
+        ),
+        (
+            "depth size",
+            Box::new(|d| {
+                image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(
+                    10,
+                    10,
+                    image::Luma([900]),
+                )
+                .save(d.join("depth.png"))
+                .unwrap()
+            }),
+            "is 10×10",
+        ),
+        (
+            "depth all zero",
+            Box::new(|d| {
+                image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(80, 60)
+                    .save(d.join("depth.png"))
+                    .unwrap()
+            }),
+            "no valid pixel",
+        ),
+        (
+            "thermal size",
+            Box::new(|d| {
+                image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(
+                    80,
+                    60,
+                    image::Luma([5000]),
+                )
+                .save(d.join("thermal.png"))
+                .unwrap()
+            }),
+            "thermal camera",
+        ),
+        (
+            "NaN in .npy",
+            Box::new(|d| {
+                let mut v = vec![295.0; 160 * 120];
+                v[100] = f64::NAN;
+                write_npy_f64(&d.join("thermal.npy"), 120, 160, &v);
+                edit_toml(d, |t| {
+                    t.replace("file = \"thermal.png\"", "file = \"thermal.npy\"")
+                        .replace("background = [\"thermal_background.png\"]", "")
+                        .replace("kind = \"counts-linear\"", "kind = \"kelvin\"")
+                        .lines()
+                        .filter(|l| !l.starts_with("gain") && !l.starts_with("offset"))
+                        .collect::<Vec<_>>()
+                        .join("\n")
+                });
+            }),
+            "not finite",
+        ),
+        (
+            "°C read as kelvin",
+            Box::new(|d| {
+                write_npy_f64(&d.join("thermal.npy"), 120, 160, &vec![22.0; 160 * 120]);
+                edit_toml(d, |t| {
+                    t.replace("file = \"thermal.png\"", "file = \"thermal.npy\"")
+                        .replace("background = [\"thermal_background.png\"]", "")
+                        .replace("kind = \"counts-linear\"", "kind = \"kelvin\"")
+                        .lines()
+                        .filter(|l| !l.starts_with("gain") && !l.starts_with("offset"))
+                        .collect::<Vec<_>>()
+                        .join("\n")
+                });
+            }),
+            "check `thermal.units`",
+        ),
+        (
+            "empty mask",
+            Box::new(|d| {
+                image::GrayImage::new(80, 60)
+                    .save(d.join("masks/object_0.png"))
+                    .unwrap()
+            }),
+            "empty",
+        ),
+        (
+            "mask outside the capture",
+            Box::new(|d| edit_toml(d, |t| t.replace("masks/object_0.png", "../object_0.png"))),
+            "inside the capture directory",
+        ),
+        (
+            "zero depth units",
+            Box::new(|d| edit_toml(d, |t| t.replace("units_m = 0.001", "units_m = 0.0"))),
+            "units_m",
+        ),
+        (
+            "zero IMU up",
+            Box::new(|d| {
+                edit_toml(d, |t| {
+                    t.lines()
+                        .map(|l| {
+                            if l.starts_with("up = ") {
+                                "up = [0.0, 0.0, 0.0]"
+                            } else {
+                                l
+                            }
+                        })
+                        .collect::<Vec<_>>()
+                        .join("\n")
+                })
+            }),
+            "depth.up",
+        ),
+        (
+            "negative gain",
+            Box::new(|d| edit_toml(d, |t| t.replacen("gain = ", "gain = -", 1))),
+            "gain",
+        ),
+        (
+            "no objects",
+            Box::new(|d| edit_toml(d, |t| t.split("[[object]]").next().unwrap().to_string())),
+            "no objects",
+        ),
+        (
+            "background missing",
+            Box::new(|d| std::fs::remove_file(d.join("thermal_background.png")).unwrap()),
+            "thermal_background.png",
+        ),
+        (
+            "rgb wrong size",
+            Box::new(|d| image::RgbImage::new(5, 5).save(d.join("rgb.png")).unwrap()),
+            "rgb.png",
+        ),
     ];
     assert!(cases.len() >= 15);
     for (name, breaker, expect) in cases {
@@ -144,7 +344,10 @@ fn broken_captures_give_clear_errors() {
             Ok(Err(e)) => e.to_string(),
             Err(_) => panic!("{name}: the loader panicked"),
         };
-        assert!(err.contains(expect), "{name}: `{err}` does not mention `{expect}`");
+        assert!(
+            err.contains(expect),
+            "{name}: `{err}` does not mention `{expect}`"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
     std::fs::remove_dir_all(&base).ok();

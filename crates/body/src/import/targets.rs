@@ -29,14 +29,23 @@ pub struct Blendshape {
 pub fn adult_blendshapes() -> Vec<Blendshape> {
     let mut out = Vec::new();
     let mut push = |block: &str, parts: &[&str], file: String, factors: [i8; 7]| {
-        out.push(Blendshape { label: format!("{block}:{}", parts.join("-")), file, factors });
+        out.push(Blendshape {
+            label: format!("{block}:{}", parts.join("-")),
+            file,
+            factors,
+        });
     };
     for (g, gn) in GENDERS.iter().enumerate() {
         for (a, an) in AGES.iter().enumerate() {
             for (m, mn) in MUSCLES.iter().enumerate() {
                 for (w, wn) in WEIGHTS.iter().enumerate() {
                     let f = [g as i8, a as i8, m as i8, w as i8, -1, -1, -1];
-                    push("universal", &[gn, an, mn, wn], format!("{DIR}/universal-{gn}-{an}-{mn}-{wn}.target.gz"), f);
+                    push(
+                        "universal",
+                        &[gn, an, mn, wn],
+                        format!("{DIR}/universal-{gn}-{an}-{mn}-{wn}.target.gz"),
+                        f,
+                    );
                 }
             }
         }
@@ -45,7 +54,12 @@ pub fn adult_blendshapes() -> Vec<Blendshape> {
         for (g, gn) in GENDERS.iter().enumerate() {
             for (a, an) in AGES.iter().enumerate() {
                 let f = [g as i8, a as i8, -1, -1, -1, -1, r as i8];
-                push("race", &[rn, gn, an], format!("{DIR}/{rn}-{gn}-{an}.target.gz"), f);
+                push(
+                    "race",
+                    &[rn, gn, an],
+                    format!("{DIR}/{rn}-{gn}-{an}.target.gz"),
+                    f,
+                );
             }
         }
     }
@@ -55,7 +69,12 @@ pub fn adult_blendshapes() -> Vec<Blendshape> {
                 for (w, wn) in WEIGHTS.iter().enumerate() {
                     for (h, hn) in HEIGHTS.iter().enumerate() {
                         let f = [g as i8, a as i8, m as i8, w as i8, h as i8, -1, -1];
-                        push("height", &[gn, an, mn, wn, hn], format!("{DIR}/height/{gn}-{an}-{mn}-{wn}-{hn}.target.gz"), f);
+                        push(
+                            "height",
+                            &[gn, an, mn, wn, hn],
+                            format!("{DIR}/height/{gn}-{an}-{mn}-{wn}-{hn}.target.gz"),
+                            f,
+                        );
                     }
                 }
             }
@@ -67,7 +86,12 @@ pub fn adult_blendshapes() -> Vec<Blendshape> {
                 for (w, wn) in WEIGHTS.iter().enumerate() {
                     for (p, pn) in PROPORTIONS.iter().enumerate() {
                         let f = [g as i8, a as i8, m as i8, w as i8, -1, p as i8, -1];
-                        push("proportions", &[gn, an, mn, wn, pn], format!("{DIR}/proportions/{gn}-{an}-{mn}-{wn}-{pn}.target.gz"), f);
+                        push(
+                            "proportions",
+                            &[gn, an, mn, wn, pn],
+                            format!("{DIR}/proportions/{gn}-{an}-{mn}-{wn}-{pn}.target.gz"),
+                            f,
+                        );
                     }
                 }
             }
@@ -77,7 +101,11 @@ pub fn adult_blendshapes() -> Vec<Blendshape> {
 }
 
 /// Parses a `.target.gz` text into dense world-frame offsets over all base vertices.
-pub fn read_target(wheel: &mut Wheel, file: &str, n_base: usize) -> Result<Vec<[f64; 3]>, BodyError> {
+pub fn read_target(
+    wheel: &mut Wheel,
+    file: &str,
+    n_base: usize,
+) -> Result<Vec<[f64; 3]>, BodyError> {
     let text = wheel.read_gz_string(file)?;
     let mut off = vec![[0.0; 3]; n_base];
     for (ln, line) in text.lines().enumerate() {
@@ -90,7 +118,11 @@ pub fn read_target(wheel: &mut Wheel, file: &str, n_base: usize) -> Result<Vec<[
             return Err(bad());
         }
         let i: usize = t[0].parse().map_err(|_| bad())?;
-        let d: Vec<f64> = t[1..].iter().map(|s| s.parse::<f64>()).collect::<Result<_, _>>().map_err(|_| bad())?;
+        let d: Vec<f64> = t[1..]
+            .iter()
+            .map(|s| s.parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| bad())?;
         if i >= n_base || d.iter().any(|x| !x.is_finite()) {
             return Err(bad());
         }

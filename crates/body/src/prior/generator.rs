@@ -28,7 +28,23 @@ use rand_distr::{Distribution, Normal};
 
 /// The template names.
 pub const TEMPLATES: [&str; 17] = [
-    "stand", "a-pose", "t-pose", "walk", "run", "reach", "point", "wave", "arms-up", "hands-on-hips", "bend", "squat", "lunge", "sit", "kneel", "turn", "look",
+    "stand",
+    "a-pose",
+    "t-pose",
+    "walk",
+    "run",
+    "reach",
+    "point",
+    "wave",
+    "arms-up",
+    "hands-on-hips",
+    "bend",
+    "squat",
+    "lunge",
+    "sit",
+    "kneel",
+    "turn",
+    "look",
 ];
 
 /// Draws poses (rotation vectors, root = identity) for one body model.
@@ -45,7 +61,11 @@ impl PoseGenerator {
     pub fn new(model: &BodyModel) -> Self {
         let names = &model.asset.meta.bone_names;
         Self {
-            index: names.iter().enumerate().map(|(i, n)| (n.clone(), i)).collect(),
+            index: names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (n.clone(), i))
+                .collect(),
             mirror: model.mirror_joints(),
             n: names.len(),
             limits: JointLimits::for_model(model),
@@ -103,7 +123,10 @@ impl PoseGenerator {
                 set("clavicle.L", [0.0, u(-15.0, 0.0), 0.0]);
             }
             "point" => {
-                set("upperarm01.L", [-u(70.0, 110.0), u(-10.0, 10.0), u(-20.0, 20.0)]);
+                set(
+                    "upperarm01.L",
+                    [-u(70.0, 110.0), u(-10.0, 10.0), u(-20.0, 20.0)],
+                );
                 set("lowerarm01.L", [u(-10.0, 0.0), 0.0, 0.0]);
                 set("neck03", [0.0, 0.0, u(0.0, 20.0)]);
             }
@@ -120,8 +143,14 @@ impl PoseGenerator {
                 set("lowerarm01.R", [-u(0.0, 30.0), 0.0, 0.0]);
             }
             "hands-on-hips" => {
-                set("upperarm01.L", [u(10.0, 30.0), u(-20.0, 0.0), u(30.0, 60.0)]);
-                set("upperarm01.R", [u(10.0, 30.0), u(0.0, 20.0), -u(30.0, 60.0)]);
+                set(
+                    "upperarm01.L",
+                    [u(10.0, 30.0), u(-20.0, 0.0), u(30.0, 60.0)],
+                );
+                set(
+                    "upperarm01.R",
+                    [u(10.0, 30.0), u(0.0, 20.0), -u(30.0, 60.0)],
+                );
                 set("lowerarm01.L", [-u(80.0, 110.0), 0.0, 0.0]);
                 set("lowerarm01.R", [-u(80.0, 110.0), 0.0, 0.0]);
             }
@@ -142,7 +171,10 @@ impl PoseGenerator {
                     set(&format!("upperleg01.{side}"), [-hip, -10.0 * sy, 10.0 * sy]);
                     set(&format!("lowerleg01.{side}"), [knee, 0.0, 0.0]);
                     set(&format!("foot.{side}"), [-u(5.0, 20.0), 0.0, 0.0]);
-                    set(&format!("upperarm01.{side}"), [-u(50.0, 90.0), 20.0 * sy, 0.0]);
+                    set(
+                        &format!("upperarm01.{side}"),
+                        [-u(50.0, 90.0), 20.0 * sy, 0.0],
+                    );
                 }
                 set("spine04", [u(5.0, 15.0), 0.0, 0.0]);
             }
@@ -194,10 +226,12 @@ impl PoseGenerator {
         let name = TEMPLATES[rng.random_range(0..TEMPLATES.len())];
         let mut r = self.template(name, rng).expect("known template");
         if rng.random_bool(0.5) {
-            let m: Vec<[f64; 3]> = (0..self.n).map(|i| {
-                let w = r[self.mirror[i]];
-                [w[0], -w[1], -w[2]]
-            }).collect();
+            let m: Vec<[f64; 3]> = (0..self.n)
+                .map(|i| {
+                    let w = r[self.mirror[i]];
+                    [w[0], -w[1], -w[2]]
+                })
+                .collect();
             r = m;
         }
         let noise = Normal::new(0.0, 5f64.to_radians()).expect("σ > 0");

@@ -36,7 +36,9 @@ fn left_or_mid(name: &str) -> Option<Box3> {
         "upperleg02" | "lowerleg02" => b([-5.0, 5.0], [-5.0, 5.0], [-15.0, 15.0]),
         "lowerleg01" => b([0.0, 135.0], [-5.0, 5.0], [-10.0, 10.0]),
         "foot" => b([-20.0, 50.0], [-25.0, 25.0], [-20.0, 20.0]),
-        "spine05" | "spine04" | "spine03" | "spine02" | "spine01" => b([-5.0, 16.0], [-7.0, 7.0], [-9.0, 9.0]),
+        "spine05" | "spine04" | "spine03" | "spine02" | "spine01" => {
+            b([-5.0, 16.0], [-7.0, 7.0], [-9.0, 9.0])
+        }
         "neck01" | "neck02" | "neck03" => b([-15.0, 15.0], [-15.0, 15.0], [-20.0, 20.0]),
         "head" => b([-15.0, 15.0], [-10.0, 10.0], [-15.0, 15.0]),
         "clavicle" => b([-15.0, 15.0], [-15.0, 15.0], [-10.0, 10.0]),
@@ -97,7 +99,13 @@ impl JointLimits {
         rotvecs
             .iter()
             .zip(&self.boxes)
-            .map(|(w, b)| b.map_or(0.0, |b| (0..3).map(|k| (b[k][0] - w[k]).max(w[k] - b[k][1]).max(0.0)).fold(0.0, f64::max)))
+            .map(|(w, b)| {
+                b.map_or(0.0, |b| {
+                    (0..3)
+                        .map(|k| (b[k][0] - w[k]).max(w[k] - b[k][1]).max(0.0))
+                        .fold(0.0, f64::max)
+                })
+            })
             .collect()
     }
 
@@ -106,7 +114,13 @@ impl JointLimits {
         rotvecs
             .iter()
             .zip(&self.boxes)
-            .filter_map(|(w, b)| b.map(|b| (0..3).map(|k| (b[k][0] - w[k]).max(w[k] - b[k][1]).max(0.0)).fold(0.0, f64::max)))
+            .filter_map(|(w, b)| {
+                b.map(|b| {
+                    (0..3)
+                        .map(|k| (b[k][0] - w[k]).max(w[k] - b[k][1]).max(0.0))
+                        .fold(0.0, f64::max)
+                })
+            })
             .fold(0.0, f64::max)
     }
 }

@@ -19,12 +19,15 @@ pub mod train;
 pub mod vae;
 
 use candle_core::{DType, Tensor};
-use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd, sixd_to_matrix_vjp};
+use irmirror_geom::rotation::{
+    axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd, sixd_to_matrix_vjp,
+};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector6};
 pub use vae::{JOINTS, LATENT, PoseVae, PriorError};
 
 /// The shipped weights (see `assets/pose_prior/README.md`).
-pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../../../assets/pose_prior/pose_vae.safetensors");
+pub const BUILTIN_WEIGHTS: &[u8] =
+    include_bytes!("../../../../assets/pose_prior/pose_vae.safetensors");
 
 /// The prior, ready to decode.
 pub struct PosePrior {
@@ -42,15 +45,22 @@ impl PosePrior {
             let (rows, cols) = w.dims2()?;
             let w = w.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
             let b = b.to_dtype(DType::F64)?.to_vec1::<f64>()?;
-            Ok((DMatrix::from_row_slice(rows, cols, &w), DVector::from_vec(b)))
+            Ok((
+                DMatrix::from_row_slice(rows, cols, &w),
+                DVector::from_vec(b),
+            ))
         };
         let decoder = [layer("dec1")?, layer("dec2")?, layer("dec3")?];
-        Ok(Self { vae: vae.frozen(), decoder })
+        Ok(Self {
+            vae: vae.frozen(),
+            decoder,
+        })
     }
 
     /// The shipped prior in `dtype` (F32 for use, F64 for gradient tests).
     pub fn builtin(dtype: DType) -> Result<Self, PriorError> {
-        let tensors = candle_core::safetensors::load_buffer(BUILTIN_WEIGHTS, &candle_core::Device::Cpu)?;
+        let tensors =
+            candle_core::safetensors::load_buffer(BUILTIN_WEIGHTS, &candle_core::Device::Cpu)?;
         Self::new(PoseVae::from_tensors(tensors, dtype)?)
     }
 
@@ -67,31 +77,64 @@ impl PosePrior {
     /// Decodes a batch of latents (one candle call) to 36 rotations each (root = identity): the
     /// optimiser's parallel initialisations.
     pub fn decode_batch(&self, zs: &[Vec<f64>]) -> Result<Vec<Vec<Matrix3<f64>>>, PriorError> {
-        if zs.iter().any(|z| z.len() != LATENT || z.iter().any(|x| !x.is_finite())) {
-            return Err(candle_core::Error::Msg(format!("every latent must hold {LATENT} finite values")).into());
+        if zs
+            .iter()
+            .any(|z| z.len() != LATENT || z.iter().any(|x| !x.is_finite()))
+        {
+            return Err(candle_core::Error::Msg(format!(
+                "every latent must hold {LATENT} finite values"
+            ))
+            .into());
         }
         let flat: Vec<f64> = zs.iter().flatten().copied().collect();
-        let t = Tensor::from_vec(flat, (zs.len(), LATENT), self.vae.device())?.to_dtype(self.vae.dtype())?;
-        let r = self.vae.decode(&t)?.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+        let t = Tensor::from_vec(flat, (zs.len(), LATENT), self.vae.device())?
+            .to_dtype(self.vae.dtype())?;
+        let r = self
+            .vae
+            .decode(&t)?
+            .to_dtype(DType::F64)?
+            .flatten_all()?
+            .to_vec1::<f64>()?;
         Ok(r.chunks_exact(9 * JOINTS)
-            .map(|one| std::iter::once(Matrix3::identity()).chain(one.chunks_exact(9).map(Matrix3::from_row_slice)).collect())
+            .map(|one| {
+                std::iter::once(Matrix3::identity())
+                    .chain(one.chunks_exact(9).map(Matrix3::from_row_slice))
+                    .collect()
+            })
             .collect())
     }
 
     /// Decodes one latent to 36 rotation vectors (root zero).
     pub fn decode_axis_angles(&self, z: &[f64]) -> Result<Vec<[f64; 3]>, PriorError> {
-        Ok(self.decode(z)?.iter().map(|m| matrix_to_axis_angle(m).into()).collect())
+        Ok(self
+            .decode(z)?
+            .iter()
+            .map(|m| matrix_to_axis_angle(m).into())
+            .collect())
     }
 
     /// `∂L/∂z` from `∂L/∂R` of the 36 (or 35 body) rotations of [`Self::decode`].
-    pub fn decode_vjp(&self, z: &[f64], d_rotations: &[Matrix3<f64>]) -> Result<Vec<f64>, PriorError> {
+    pub fn decode_vjp(
+        &self,
+        z: &[f64],
+        d_rotations: &[Matrix3<f64>],
+    ) -> Result<Vec<f64>, PriorError> {
         let body = match d_rotations.len() {
             36 => &d_rotations[1..],
             35 => d_rotations,
-            n => return Err(candle_core::Error::Msg(format!("{n} rotation gradients, expected 35 or 36")).into()),
+            n => {
+                return Err(candle_core::Error::Msg(format!(
+                    "{n} rotation gradients, expected 35 or 36"
+                ))
+                .into());
+            }
         };
         if z.len() != LATENT || z.iter().any(|x| !x.is_finite()) {
-            return Err(candle_core::Error::Msg(format!("the latent must hold {LATENT} finite values, got {}", z.len())).into());
+            return Err(candle_core::Error::Msg(format!(
+                "the latent must hold {LATENT} finite values, got {}",
+                z.len()
+            ))
+            .into());
         }
         // Forward in f64, keeping the pre-activations.
         let [(w1, b1), (w2, b2), (w3, b3)] = &self.decoder;
@@ -103,7 +146,9 @@ impl PosePrior {
         let mut g_six = DVector::zeros(six.len());
         for (j, g) in body.iter().enumerate() {
             let x = Vector6::from_column_slice(&six.as_slice()[6 * j..6 * j + 6]);
-            g_six.rows_mut(6 * j, 6).copy_from(&sixd_to_matrix_vjp(&x, g));
+            g_six
+                .rows_mut(6 * j, 6)
+                .copy_from(&sixd_to_matrix_vjp(&x, g));
         }
         let dsilu = |a: &DVector<f64>, g: DVector<f64>| {
             g.zip_map(a, |g, x| {
@@ -119,7 +164,8 @@ impl PosePrior {
     /// The encoder mean for a pose given as 36 rotation vectors (root ignored).
     pub fn encode(&self, rotvecs: &[[f64; 3]]) -> Result<Vec<f64>, PriorError> {
         let x = features(std::slice::from_ref(&rotvecs.to_vec()));
-        let t = Tensor::from_vec(x, (1, 6 * JOINTS), self.vae.device())?.to_dtype(self.vae.dtype())?;
+        let t =
+            Tensor::from_vec(x, (1, 6 * JOINTS), self.vae.device())?.to_dtype(self.vae.dtype())?;
         let (mu, _) = self.vae.encode(&t)?;
         Ok(mu.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
     }
@@ -127,18 +173,30 @@ impl PosePrior {
 
 /// The prior loss `‖z‖²` and its gradient `2z`.
 pub fn latent_prior(z: &[f64]) -> (f64, Vec<f64>) {
-    (z.iter().map(|x| x * x).sum(), z.iter().map(|x| 2.0 * x).collect())
+    (
+        z.iter().map(|x| x * x).sum(),
+        z.iter().map(|x| 2.0 * x).collect(),
+    )
 }
 
 /// 6-D features (joints 1…35, row-major) of poses given as rotation vectors.
 pub fn features(poses: &[Vec<[f64; 3]>]) -> Vec<f64> {
     poses
         .iter()
-        .flat_map(|p| p[1..].iter().flat_map(|w| matrix_to_sixd(&axis_angle_to_matrix(&Vector3::from(*w))).iter().copied().collect::<Vec<_>>()))
+        .flat_map(|p| {
+            p[1..].iter().flat_map(|w| {
+                matrix_to_sixd(&axis_angle_to_matrix(&Vector3::from(*w)))
+                    .iter()
+                    .copied()
+                    .collect::<Vec<_>>()
+            })
+        })
         .collect()
 }
 
 /// Geodesic angle between two rotations, radians.
 pub fn rotation_angle(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
-    (((a.transpose() * b).trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+    (((a.transpose() * b).trace() - 1.0) / 2.0)
+        .clamp(-1.0, 1.0)
+        .acos()
 }

@@ -21,7 +21,22 @@ const CAPSULES: [(&str, Option<&str>, f64); 9] = [
 
 /// Pairs that must not overlap (indices into `CAPSULES`): legs with each other, arms with the
 /// torso and the legs, forearms with each other.
-const PAIRS: [(usize, usize); 14] = [(0, 2), (1, 3), (0, 3), (1, 2), (5, 8), (7, 8), (5, 0), (7, 2), (5, 1), (7, 3), (5, 7), (4, 8), (6, 8), (5, 6)];
+const PAIRS: [(usize, usize); 14] = [
+    (0, 2),
+    (1, 3),
+    (0, 3),
+    (1, 2),
+    (5, 8),
+    (7, 8),
+    (5, 0),
+    (7, 2),
+    (5, 1),
+    (7, 3),
+    (5, 7),
+    (4, 8),
+    (6, 8),
+    (5, 6),
+];
 
 /// Capsule-overlap tester for one skeleton.
 pub struct PenetrationTest {
@@ -31,7 +46,12 @@ pub struct PenetrationTest {
 }
 
 /// Closest distance between segments `p0–p1` and `q0–q1` (Ericson §5.1.9).
-fn segment_distance(p0: &Vector3<f64>, p1: &Vector3<f64>, q0: &Vector3<f64>, q1: &Vector3<f64>) -> f64 {
+fn segment_distance(
+    p0: &Vector3<f64>,
+    p1: &Vector3<f64>,
+    q0: &Vector3<f64>,
+    q1: &Vector3<f64>,
+) -> f64 {
     let (d1, d2, r) = (p1 - p0, q1 - q0, p0 - q0);
     let (a, e, f) = (d1.norm_squared(), d2.norm_squared(), d2.dot(&r));
     let (s, t);
@@ -49,7 +69,11 @@ fn segment_distance(p0: &Vector3<f64>, p1: &Vector3<f64>, q0: &Vector3<f64>, q1:
         } else {
             let b = d1.dot(&d2);
             let denom = a * e - b * b;
-            let mut ss = if denom > 1e-12 { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut ss = if denom > 1e-12 {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let mut tt = (b * ss + f) / e;
             if tt < 0.0 {
                 tt = 0.0;
@@ -69,17 +93,36 @@ impl PenetrationTest {
     /// For `model` at its mean shape.
     pub fn new(model: &BodyModel) -> Self {
         let idx = |n: &str| model.joint_index(n).expect("body bone");
-        let capsules = CAPSULES.iter().map(|(a, b, r)| (idx(a), idx(b.expect("segment end")), *r)).collect();
-        let shaped = model.shaped(&vec![0.0; model.rank()]).expect("zero shape is valid");
-        Self { capsules, shaped, parents: model.asset.parents.clone() }
+        let capsules = CAPSULES
+            .iter()
+            .map(|(a, b, r)| (idx(a), idx(b.expect("segment end")), *r))
+            .collect();
+        let shaped = model
+            .shaped(&vec![0.0; model.rank()])
+            .expect("zero shape is valid");
+        Self {
+            capsules,
+            shaped,
+            parents: model.asset.parents.clone(),
+        }
     }
 
     /// True if two capsules that should stay apart overlap by more than 20 % of their radii.
     pub fn penetrates(&self, rotvecs: &[[f64; 3]]) -> bool {
-        let rot: Vec<Matrix3<f64>> = rotvecs.iter().map(|w| axis_angle_to_matrix(&Vector3::from(*w))).collect();
+        let rot: Vec<Matrix3<f64>> = rotvecs
+            .iter()
+            .map(|w| axis_angle_to_matrix(&Vector3::from(*w)))
+            .collect();
         let n = rot.len();
         let (mut g, mut t) = (vec![Matrix3::identity(); n], vec![Vector3::zeros(); n]);
-        fk::forward(&self.parents, &self.shaped.joint_heads, &rot, &Vector3::zeros(), &mut g, &mut t);
+        fk::forward(
+            &self.parents,
+            &self.shaped.joint_heads,
+            &rot,
+            &Vector3::zeros(),
+            &mut g,
+            &mut t,
+        );
         PAIRS.iter().any(|&(i, j)| {
             let (a0, a1, ra) = self.capsules[i];
             let (b0, b1, rb) = self.capsules[j];
@@ -95,8 +138,35 @@ mod tests {
     #[test]
     fn segment_distance_closed_forms() {
         let v = Vector3::new;
-        assert!((segment_distance(&v(0.0, 0.0, 0.0), &v(1.0, 0.0, 0.0), &v(0.5, 1.0, 0.0), &v(0.5, 2.0, 0.0)) - 1.0).abs() < 1e-12);
-        assert!((segment_distance(&v(0.0, 0.0, 0.0), &v(1.0, 0.0, 0.0), &v(0.5, -1.0, 1.0), &v(0.5, 1.0, 1.0)) - 1.0).abs() < 1e-12);
-        assert!((segment_distance(&v(0.0, 0.0, 0.0), &v(1.0, 0.0, 0.0), &v(2.0, 0.0, 0.0), &v(3.0, 0.0, 0.0)) - 1.0).abs() < 1e-12);
+        assert!(
+            (segment_distance(
+                &v(0.0, 0.0, 0.0),
+                &v(1.0, 0.0, 0.0),
+                &v(0.5, 1.0, 0.0),
+                &v(0.5, 2.0, 0.0)
+            ) - 1.0)
+                .abs()
+                < 1e-12
+        );
+        assert!(
+            (segment_distance(
+                &v(0.0, 0.0, 0.0),
+                &v(1.0, 0.0, 0.0),
+                &v(0.5, -1.0, 1.0),
+                &v(0.5, 1.0, 1.0)
+            ) - 1.0)
+                .abs()
+                < 1e-12
+        );
+        assert!(
+            (segment_distance(
+                &v(0.0, 0.0, 0.0),
+                &v(1.0, 0.0, 0.0),
+                &v(2.0, 0.0, 0.0),
+                &v(3.0, 0.0, 0.0)
+            ) - 1.0)
+                .abs()
+                < 1e-12
+        );
     }
 }

@@ -34,7 +34,15 @@ pub struct TrainConfig {
 
 impl Default for TrainConfig {
     fn default() -> Self {
-        Self { poses: 100_000, held_out: 2_000, steps: 6_000, batch: 256, lr: 1e-3, kl_weight: 5e-3, seed: 0 }
+        Self {
+            poses: 100_000,
+            held_out: 2_000,
+            steps: 6_000,
+            batch: 256,
+            lr: 1e-3,
+            kl_weight: 5e-3,
+            seed: 0,
+        }
     }
 }
 
@@ -66,39 +74,66 @@ pub struct TrainReport {
 fn matrices(poses: &[Vec<[f64; 3]>]) -> Vec<f64> {
     poses
         .iter()
-        .flat_map(|p| p[1..].iter().flat_map(|w| {
-            let m = axis_angle_to_matrix(&Vector3::from(*w));
-            (0..9).map(move |k| m[(k / 3, k % 3)])
-        }))
+        .flat_map(|p| {
+            p[1..].iter().flat_map(|w| {
+                let m = axis_angle_to_matrix(&Vector3::from(*w));
+                (0..9).map(move |k| m[(k / 3, k % 3)])
+            })
+        })
         .collect()
 }
 
 /// Trains a prior; `progress(step, loss)` is called every 50 steps.
-pub fn train(model: &BodyModel, cfg: &TrainConfig, mut progress: impl FnMut(usize, f64)) -> Result<(PoseVae, TrainReport), PriorError> {
+pub fn train(
+    model: &BodyModel,
+    cfg: &TrainConfig,
+    mut progress: impl FnMut(usize, f64),
+) -> Result<(PoseVae, TrainReport), PriorError> {
     let poses_gen = PoseGenerator::new(model);
     let mut data_rng = irmirror_geom::rng::seeded(cfg.seed, 1);
-    let poses: Vec<Vec<[f64; 3]>> = (0..cfg.poses).map(|_| poses_gen.sample(&mut data_rng).1).collect();
+    let poses: Vec<Vec<[f64; 3]>> = (0..cfg.poses)
+        .map(|_| poses_gen.sample(&mut data_rng).1)
+        .collect();
     let mut hold_rng = irmirror_geom::rng::seeded(cfg.seed, 2);
-    let held: Vec<Vec<[f64; 3]>> = (0..cfg.held_out).map(|_| poses_gen.sample(&mut hold_rng).1).collect();
+    let held: Vec<Vec<[f64; 3]>> = (0..cfg.held_out)
+        .map(|_| poses_gen.sample(&mut hold_rng).1)
+        .collect();
     let dev = candle_core::Device::Cpu;
-    let x_all = Tensor::from_vec(features(&poses), (cfg.poses, 6 * super::JOINTS), &dev)?.to_dtype(DType::F32)?;
-    let r_all = Tensor::from_vec(matrices(&poses), (cfg.poses, super::JOINTS, 3, 3), &dev)?.to_dtype(DType::F32)?;
+    let x_all = Tensor::from_vec(features(&poses), (cfg.poses, 6 * super::JOINTS), &dev)?
+        .to_dtype(DType::F32)?;
+    let r_all = Tensor::from_vec(matrices(&poses), (cfg.poses, super::JOINTS, 3, 3), &dev)?
+        .to_dtype(DType::F32)?;
 
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 3);
     let vae = PoseVae::new(&mut rng)?;
-    let mut opt = AdamW::new(vae.vars(), ParamsAdamW { lr: cfg.lr, weight_decay: 0.0, ..Default::default() })?;
+    let mut opt = AdamW::new(
+        vae.vars(),
+        ParamsAdamW {
+            lr: cfg.lr,
+            weight_decay: 0.0,
+            ..Default::default()
+        },
+    )?;
     let t0 = std::time::Instant::now();
     let (mut last_rec, mut last_kl) = (0.0, 0.0);
     for step in 0..cfg.steps {
-        let idx: Vec<u32> = (0..cfg.batch).map(|_| rng.random_range(0..cfg.poses as u32)).collect();
+        let idx: Vec<u32> = (0..cfg.batch)
+            .map(|_| rng.random_range(0..cfg.poses as u32))
+            .collect();
         let idx = Tensor::from_vec(idx, cfg.batch, &dev)?;
         let x = x_all.index_select(&idx, 0)?;
         let r = r_all.index_select(&idx, 0)?;
         let (mu, logvar) = vae.encode(&x)?;
         let eps = vae.normal(&mut rng, cfg.batch)?;
         let z = (&mu + (logvar.affine(0.5, 0.0)?.exp()? * eps)?)?;
-        let rec = (vae.decode(&z)? - &r)?.sqr()?.sum_all()?.affine(1.0 / cfg.batch as f64, 0.0)?;
-        let kl = ((mu.sqr()? + logvar.exp()?)? - logvar)?.affine(1.0, -1.0)?.sum_all()?.affine(0.5 / cfg.batch as f64, 0.0)?;
+        let rec = (vae.decode(&z)? - &r)?
+            .sqr()?
+            .sum_all()?
+            .affine(1.0 / cfg.batch as f64, 0.0)?;
+        let kl = ((mu.sqr()? + logvar.exp()?)? - logvar)?
+            .affine(1.0, -1.0)?
+            .sum_all()?
+            .affine(0.5 / cfg.batch as f64, 0.0)?;
         let beta = cfg.kl_weight * (2.0 * step as f64 / cfg.steps as f64).min(1.0);
         let loss = (&rec + kl.affine(beta, 0.0)?)?;
         opt.backward_step(&loss)?;
@@ -116,14 +151,26 @@ pub fn train(model: &BodyModel, cfg: &TrainConfig, mut progress: impl FnMut(usiz
     for p in &held {
         let z = prior.encode(p)?;
         let dec = prior.decode(&z)?;
-        err_sum += p[1..].iter().zip(&dec[1..]).map(|(w, m)| rotation_angle(&axis_angle_to_matrix(&Vector3::from(*w)), m)).sum::<f64>() / super::JOINTS as f64;
+        err_sum += p[1..]
+            .iter()
+            .zip(&dec[1..])
+            .map(|(w, m)| rotation_angle(&axis_angle_to_matrix(&Vector3::from(*w)), m))
+            .sum::<f64>()
+            / super::JOINTS as f64;
     }
     let pen = PenetrationTest::new(model);
     let n_samples = 2000;
     let mut sample_rng = irmirror_geom::rng::seeded(cfg.seed, 4);
     let (mut out5, mut out0, mut pen_s, mut joints5) = (0, 0, 0, 0);
     for _ in 0..n_samples {
-        let z: Vec<f64> = (0..super::LATENT).map(|_| rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut sample_rng)).collect();
+        let z: Vec<f64> = (0..super::LATENT)
+            .map(|_| {
+                rand_distr::Distribution::<f64>::sample(
+                    &rand_distr::StandardNormal,
+                    &mut sample_rng,
+                )
+            })
+            .collect();
         let r = prior.decode_axis_angles(&z)?;
         let per_joint = poses_gen.limits.joint_violations(&r);
         joints5 += per_joint.iter().filter(|v| **v > 5f64.to_radians()).count();
@@ -132,7 +179,12 @@ pub fn train(model: &BodyModel, cfg: &TrainConfig, mut progress: impl FnMut(usiz
         out0 += usize::from(v > 1e-6);
         pen_s += usize::from(pen.penetrates(&r));
     }
-    let pen_train = poses.iter().take(20_000).filter(|p| pen.penetrates(p)).count() as f64 / poses.len().min(20_000) as f64;
+    let pen_train = poses
+        .iter()
+        .take(20_000)
+        .filter(|p| pen.penetrates(p))
+        .count() as f64
+        / poses.len().min(20_000) as f64;
     let report = TrainReport {
         config: cfg.clone(),
         train_s,

@@ -64,42 +64,74 @@ impl PoseVae {
         let mut vars = HashMap::new();
         for (name, fan_in, fan_out) in LAYERS {
             let bound = (6.0 / fan_in as f64).sqrt();
-            let w: Vec<f32> = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound) as f32).collect();
-            vars.insert(format!("{name}.weight"), Var::from_tensor(&Tensor::from_vec(w, (fan_out, fan_in), &device)?)?);
-            vars.insert(format!("{name}.bias"), Var::from_tensor(&Tensor::zeros(fan_out, DType::F32, &device)?)?);
+            let w: Vec<f32> = (0..fan_in * fan_out)
+                .map(|_| rng.random_range(-bound..bound) as f32)
+                .collect();
+            vars.insert(
+                format!("{name}.weight"),
+                Var::from_tensor(&Tensor::from_vec(w, (fan_out, fan_in), &device)?)?,
+            );
+            vars.insert(
+                format!("{name}.bias"),
+                Var::from_tensor(&Tensor::zeros(fan_out, DType::F32, &device)?)?,
+            );
         }
-        Ok(Self { vars, device, frozen: false })
+        Ok(Self {
+            vars,
+            device,
+            frozen: false,
+        })
     }
 
     /// Loads weights (safetensors), checking every tensor's shape; `dtype` F32 or F64.
     pub fn load(path: &Path, dtype: DType) -> Result<Self, PriorError> {
         let device = Device::Cpu;
-        let bad = |r: String| PriorError::Weights { path: path.display().to_string(), reason: r };
-        let tensors = candle_core::safetensors::load(path, &device).map_err(|e| bad(e.to_string()))?;
+        let bad = |r: String| PriorError::Weights {
+            path: path.display().to_string(),
+            reason: r,
+        };
+        let tensors =
+            candle_core::safetensors::load(path, &device).map_err(|e| bad(e.to_string()))?;
         Self::from_tensors(tensors, dtype).map_err(|e| bad(e.to_string()))
     }
 
     /// From a name → tensor map (e.g. weights compiled into the binary).
-    pub fn from_tensors(tensors: HashMap<String, Tensor>, dtype: DType) -> Result<Self, PriorError> {
+    pub fn from_tensors(
+        tensors: HashMap<String, Tensor>,
+        dtype: DType,
+    ) -> Result<Self, PriorError> {
         let device = Device::Cpu;
         let mut vars = HashMap::new();
         for (name, fan_in, fan_out) in LAYERS {
             for (suffix, shape) in [("weight", vec![fan_out, fan_in]), ("bias", vec![fan_out])] {
                 let key = format!("{name}.{suffix}");
-                let t = tensors.get(&key).ok_or_else(|| candle_core::Error::Msg(format!("missing tensor `{key}`")))?;
+                let t = tensors
+                    .get(&key)
+                    .ok_or_else(|| candle_core::Error::Msg(format!("missing tensor `{key}`")))?;
                 if t.dims() != shape.as_slice() {
-                    return Err(candle_core::Error::Msg(format!("tensor `{key}` has shape {:?}, expected {shape:?}", t.dims())).into());
+                    return Err(candle_core::Error::Msg(format!(
+                        "tensor `{key}` has shape {:?}, expected {shape:?}",
+                        t.dims()
+                    ))
+                    .into());
                 }
                 vars.insert(key, Var::from_tensor(&t.to_dtype(dtype)?)?);
             }
         }
-        Ok(Self { vars, device, frozen: false })
+        Ok(Self {
+            vars,
+            device,
+            frozen: false,
+        })
     }
 
     /// Writes the weights (f32 safetensors).
     pub fn save(&self, path: &Path) -> Result<(), PriorError> {
-        let map: HashMap<String, Tensor> =
-            self.vars.iter().map(|(k, v)| Ok((k.clone(), v.as_tensor().to_dtype(DType::F32)?))).collect::<Result<_, candle_core::Error>>()?;
+        let map: HashMap<String, Tensor> = self
+            .vars
+            .iter()
+            .map(|(k, v)| Ok((k.clone(), v.as_tensor().to_dtype(DType::F32)?)))
+            .collect::<Result<_, candle_core::Error>>()?;
         candle_core::safetensors::save(&map, path)?;
         Ok(())
     }
@@ -113,7 +145,10 @@ impl PoseVae {
 
     /// The variables' current values (copies), by name.
     pub fn vars_map(&self) -> Result<HashMap<String, Tensor>, candle_core::Error> {
-        self.vars.iter().map(|(k, v)| Ok((k.clone(), v.as_tensor().copy()?))).collect()
+        self.vars
+            .iter()
+            .map(|(k, v)| Ok((k.clone(), v.as_tensor().copy()?)))
+            .collect()
     }
 
     /// The device (CPU).
@@ -138,7 +173,12 @@ impl PoseVae {
 
     /// The weight `(out, in)` and bias `(out)` of a layer (`enc1` … `dec3`).
     pub fn layer_weights(&self, name: &str) -> Result<(Tensor, Tensor), candle_core::Error> {
-        let get = |k: String| self.vars.get(&k).map(|v| v.as_tensor().detach()).ok_or_else(|| candle_core::Error::Msg(format!("no layer `{name}`")));
+        let get = |k: String| {
+            self.vars
+                .get(&k)
+                .map(|v| v.as_tensor().detach())
+                .ok_or_else(|| candle_core::Error::Msg(format!("no layer `{name}`")))
+        };
         Ok((get(format!("{name}.weight"))?, get(format!("{name}.bias"))?))
     }
 
@@ -166,7 +206,9 @@ impl PoseVae {
 
     /// A `(B, 32)` tensor of standard-normal samples from `rng`.
     pub fn normal(&self, rng: &mut impl Rng, b: usize) -> Result<Tensor, candle_core::Error> {
-        let v: Vec<f64> = (0..b * LATENT).map(|_| StandardNormal.sample(rng)).collect();
+        let v: Vec<f64> = (0..b * LATENT)
+            .map(|_| StandardNormal.sample(rng))
+            .collect();
         Tensor::from_vec(v, (b, LATENT), &self.device)?.to_dtype(self.dtype())
     }
 }
@@ -177,7 +219,9 @@ pub fn sixd_to_matrix(x: &Tensor) -> Result<Tensor, candle_core::Error> {
     let eps = 1e-8;
     let a1 = x.narrow(D::Minus1, 0, 3)?;
     let a2 = x.narrow(D::Minus1, 3, 3)?;
-    let norm = |v: &Tensor| -> Result<Tensor, candle_core::Error> { v.sqr()?.sum_keepdim(D::Minus1)?.affine(1.0, eps)?.sqrt() };
+    let norm = |v: &Tensor| -> Result<Tensor, candle_core::Error> {
+        v.sqr()?.sum_keepdim(D::Minus1)?.affine(1.0, eps)?.sqrt()
+    };
     let b1 = a1.broadcast_div(&norm(&a1)?)?;
     let dot = (&b1 * &a2)?.sum_keepdim(D::Minus1)?;
     let u = (&a2 - b1.broadcast_mul(&dot)?)?;
@@ -185,7 +229,14 @@ pub fn sixd_to_matrix(x: &Tensor) -> Result<Tensor, candle_core::Error> {
     let c = |v: &Tensor, i: usize| v.narrow(D::Minus1, i, 1);
     let (x1, y1, z1) = (c(&b1, 0)?, c(&b1, 1)?, c(&b1, 2)?);
     let (x2, y2, z2) = (c(&b2, 0)?, c(&b2, 1)?, c(&b2, 2)?);
-    let b3 = Tensor::cat(&[((&y1 * &z2)? - (&z1 * &y2)?)?, ((&z1 * &x2)? - (&x1 * &z2)?)?, ((&x1 * &y2)? - (&y1 * &x2)?)?], D::Minus1)?;
+    let b3 = Tensor::cat(
+        &[
+            ((&y1 * &z2)? - (&z1 * &y2)?)?,
+            ((&z1 * &x2)? - (&x1 * &z2)?)?,
+            ((&x1 * &y2)? - (&y1 * &x2)?)?,
+        ],
+        D::Minus1,
+    )?;
     // Columns b1, b2, b3: stack on the last axis then the matrix is [row][col].
     Tensor::stack(&[b1, b2, b3], D::Minus1)
 }

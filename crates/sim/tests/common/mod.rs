@@ -4,7 +4,9 @@
 use irmirror_body::{BodyModel, Phenotype};
 use irmirror_geom::transform::RigidFile;
 use irmirror_geom::{PinholeCamera, Rigid3};
-use irmirror_sim::scene::{PlacedCamera, Person, SceneObject, SceneFile, Sensor, Table, ThermalCamera, look_at};
+use irmirror_sim::scene::{
+    Person, PlacedCamera, SceneFile, SceneObject, Sensor, Table, ThermalCamera, look_at,
+};
 use irmirror_sim::shapes::Shape;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::OnceLock;
@@ -20,13 +22,56 @@ pub fn small_scene() -> SceneFile {
     let cam = |w, h, fov: f64| PinholeCamera::from_fov(w, h, fov.to_radians()).unwrap();
     SceneFile {
         ambient_c: 22.0,
-        depth_camera: PlacedCamera { intrinsics: cam(80, 60, 70.0), world_from_camera: RigidFile::from_rigid(&look_at(eye, Vector3::new(0.0, -0.05, 0.75))) },
-        thermal_camera: ThermalCamera { intrinsics: cam(160, 120, 57.0), depth_from_thermal: RigidFile::from_rigid(&Rigid3 { rotation: Matrix3::identity(), translation: Vector3::new(0.04, 0.0, 0.0) }) },
-        third_camera: PlacedCamera { intrinsics: cam(64, 48, 60.0), world_from_camera: RigidFile::from_rigid(&look_at(Vector3::new(2.5, 0.0, 1.4), Vector3::new(0.0, 1.2, 0.9))) },
-        table: Some(Table { height_m: 0.75, centre_m: [0.0, 0.0], size_m: [1.4, 0.9], temp_c: 22.0, emissivity: 0.93 }),
+        depth_camera: PlacedCamera {
+            intrinsics: cam(80, 60, 70.0),
+            world_from_camera: RigidFile::from_rigid(&look_at(eye, Vector3::new(0.0, -0.05, 0.75))),
+        },
+        thermal_camera: ThermalCamera {
+            intrinsics: cam(160, 120, 57.0),
+            depth_from_thermal: RigidFile::from_rigid(&Rigid3 {
+                rotation: Matrix3::identity(),
+                translation: Vector3::new(0.04, 0.0, 0.0),
+            }),
+        },
+        third_camera: PlacedCamera {
+            intrinsics: cam(64, 48, 60.0),
+            world_from_camera: RigidFile::from_rigid(&look_at(
+                Vector3::new(2.5, 0.0, 1.4),
+                Vector3::new(0.0, 1.2, 0.9),
+            )),
+        },
+        table: Some(Table {
+            height_m: 0.75,
+            centre_m: [0.0, 0.0],
+            size_m: [1.4, 0.9],
+            temp_c: 22.0,
+            emissivity: 0.93,
+        }),
         objects: vec![
-            SceneObject { shape: Shape::Bowl { cut: 0.0, wall: 0.06 }.into(), base_m: [0.08, -0.05, 0.75], yaw_rad: 0.0, scale_m: 0.11, emissivity: 0.91, temp_c: 22.0 },
-            SceneObject { shape: Shape::Mug { aspect: 1.1, wall: 0.1 }.into(), base_m: [-0.15, -0.02, 0.75], yaw_rad: 0.5, scale_m: 0.07, emissivity: 0.91, temp_c: 22.0 },
+            SceneObject {
+                shape: Shape::Bowl {
+                    cut: 0.0,
+                    wall: 0.06,
+                }
+                .into(),
+                base_m: [0.08, -0.05, 0.75],
+                yaw_rad: 0.0,
+                scale_m: 0.11,
+                emissivity: 0.91,
+                temp_c: 22.0,
+            },
+            SceneObject {
+                shape: Shape::Mug {
+                    aspect: 1.1,
+                    wall: 0.1,
+                }
+                .into(),
+                base_m: [-0.15, -0.02, 0.75],
+                yaw_rad: 0.5,
+                scale_m: 0.07,
+                emissivity: 0.91,
+                temp_c: 22.0,
+            },
         ],
         person: Person {
             phenotype: Phenotype::default(),
