@@ -1,7 +1,7 @@
 //! `capture.toml`: the schema, with documented units. Unknown keys are errors.
 
-use irmirror_geom::PinholeCamera;
 use irmirror_geom::transform::RigidFile;
+use irmirror_geom::{Category, PinholeCamera};
 use serde::{Deserialize, Serialize};
 
 /// The format tag every `capture.toml` starts with.
@@ -125,8 +125,9 @@ pub struct RgbSpec {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
-    /// Shape category (`bowl`, `mug`, `car`, …): selects the shape prior.
-    pub category: String,
+    /// Shape category (`bowl`, `mug` or `cup`, `car`, `sphere` or `ball`): selects the shape
+    /// prior.
+    pub category: Category,
     /// Optional mask in depth-camera pixels (PNG, non-zero = object).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask: Option<String>,

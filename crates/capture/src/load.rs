@@ -4,7 +4,7 @@ use crate::CaptureError;
 use crate::format::{CaptureFile, FORMAT, ThermalUnits};
 use crate::image_io::{Image, read_float, read_gray16_png, read_mask, read_rgb};
 use crate::planck::{ZERO_C_K, band_radiance, temperature_of};
-use irmirror_geom::{PinholeCamera, Rigid3};
+use irmirror_geom::{Category, PinholeCamera, Rigid3};
 use nalgebra::Vector3;
 use std::path::{Component, Path, PathBuf};
 
@@ -15,7 +15,7 @@ const PLAUSIBLE_K: std::ops::RangeInclusive<f64> = 200.0..=500.0;
 #[derive(Clone, Debug)]
 pub struct CapturedObject {
     /// Shape category.
-    pub category: String,
+    pub category: Category,
     /// Mask in depth-camera pixels, if given.
     pub mask: Option<Image<bool>>,
 }
@@ -234,9 +234,6 @@ impl Capture {
         }
         let mut objects = Vec::new();
         for (k, o) in file.objects.iter().enumerate() {
-            if o.category.trim().is_empty() {
-                return Err(field(&format!("object[{k}].category"), "is empty".into()));
-            }
             let mask = match &o.mask {
                 Some(m) => {
                     let p = resolve(&format!("object[{k}].mask"), m)?;
@@ -253,7 +250,7 @@ impl Capture {
                 None => None,
             };
             objects.push(CapturedObject {
-                category: o.category.clone(),
+                category: o.category,
                 mask,
             });
         }

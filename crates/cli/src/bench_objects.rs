@@ -15,9 +15,9 @@ use crate::simulate_cmd::{Preset, Thermal, preset_scene_with};
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_capture::Capture;
-use irmirror_geom::Similarity3;
 use irmirror_geom::TriMesh;
 use irmirror_geom::nalgebra::Vector3;
+use irmirror_geom::{Category, Similarity3};
 use irmirror_recon::objects::{ObjectPrior, Stage1Config, reconstruct_objects};
 use irmirror_sim::presets::Shapes;
 use std::time::Instant;
@@ -25,7 +25,7 @@ use std::time::Instant;
 /// One fitted object against its truth.
 struct Row {
     seed: u64,
-    category: &'static str,
+    category: Category,
     translation_mm: f64,
     up_deg: f64,
     /// Full rotation error; `None` for bodies of revolution (bowls).
@@ -155,8 +155,8 @@ pub fn run(
             .objects
             .iter()
             .zip(sim.object_poses.iter().zip(&sim.object_meshes))
-            .map(|(o, (truth, mesh))| match (&o.mask, o.category.as_str()) {
-                (Some(m), "mug") => handle_pixels(&capture, m, truth, mesh),
+            .map(|(o, (truth, mesh))| match (&o.mask, o.category) {
+                (Some(m), Category::Mug) => handle_pixels(&capture, m, truth, mesh),
                 _ => 0,
             })
             .collect();
@@ -192,7 +192,7 @@ pub fn run(
                 category,
                 translation_mm: t,
                 up_deg: up,
-                rotation_deg: (category == "mug").then_some(full),
+                rotation_deg: (category == Category::Mug).then_some(full),
                 handle_seen: handles[k] >= HANDLE_SEEN_PX,
                 handle_px: handles[k],
                 scale_pct: s,
@@ -234,7 +234,7 @@ pub fn run(
     println!(
         "| object | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | Chamfer (mm²) | time per object (s) |\n|---|---|---|---|---|---|---|---|"
     );
-    let mut categories: Vec<&str> = rows.iter().map(|r| r.category).collect();
+    let mut categories: Vec<Category> = rows.iter().map(|r| r.category).collect();
     categories.sort();
     categories.dedup();
     for c in categories {

@@ -80,11 +80,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
         scene: "capture/truth/scene.toml",
     };
     write_text(&stage.path("run.toml"), &toml::to_string(&record)?)?;
-    let objects: Vec<&str> = capture
-        .objects
-        .iter()
-        .map(|o| o.category.as_str())
-        .collect();
+    let objects: Vec<&str> = capture.objects.iter().map(|o| o.category.name()).collect();
     let html = report_html(
         seed,
         &scene_text,

@@ -14,6 +14,7 @@ use anyhow::{Context, Result, bail};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
+use irmirror_geom::Category;
 use irmirror_geom::nalgebra::Vector3;
 use irmirror_recon::human::HumanState;
 use irmirror_recon::metrics::mean_ci95;
@@ -38,14 +39,51 @@ pub enum Set {
 }
 
 /// Object types, as the rows of Table 1.
-pub const CATEGORIES: [&str; 3] = ["bowl", "mug", "car"];
-/// The stage-2 variants: Table 1's columns (ablations, then the full model).
-pub const VARIANTS: [(&str, Option<Ablation>); 4] = [
-    ("w/o edge sampling", Some(Ablation::EdgeSampling)),
-    ("w/o sphere tracing", Some(Ablation::SphereTracing)),
-    ("w/o surface smoothing", Some(Ablation::Smoothing)),
-    ("full model", None),
-];
+pub const CATEGORIES: [Category; 3] = [Category::Bowl, Category::Mug, Category::Car];
+
+/// A stage-2 variant: Table 1's columns (ablations, then the full model).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Variant {
+    /// Without edge sampling.
+    NoEdgeSampling,
+    /// Without sphere tracing.
+    NoSphereTracing,
+    /// Without surface smoothing.
+    NoSmoothing,
+    /// The full model.
+    Full,
+}
+
+impl Variant {
+    /// Every variant, in the table's column order.
+    pub const ALL: [Variant; 4] = [
+        Variant::NoEdgeSampling,
+        Variant::NoSphereTracing,
+        Variant::NoSmoothing,
+        Variant::Full,
+    ];
+
+    /// The column heading.
+    pub fn heading(self) -> &'static str {
+        match self {
+            Variant::NoEdgeSampling => "w/o edge sampling",
+            Variant::NoSphereTracing => "w/o sphere tracing",
+            Variant::NoSmoothing => "w/o surface smoothing",
+            Variant::Full => "full model",
+        }
+    }
+
+    /// The ablation it switches on (`None`: the full model).
+    pub fn ablation(self) -> Option<Ablation> {
+        match self {
+            Variant::NoEdgeSampling => Some(Ablation::EdgeSampling),
+            Variant::NoSphereTracing => Some(Ablation::SphereTracing),
+            Variant::NoSmoothing => Some(Ablation::Smoothing),
+            Variant::Full => None,
+        }
+    }
+}
 /// Random pose draws per capture for the baseline.
 pub const RANDOM_DRAWS: usize = 8;
 /// Seeds of the benchmark start here (held out from the demo's and tests' small seeds).
@@ -68,7 +106,7 @@ pub struct CaptureResult {
     /// Identifier (`<type>_<index>`).
     pub id: String,
     /// Object type.
-    pub category: String,
+    pub category: Category,
     /// Scene seed.
     pub seed: u64,
     /// Thermal NETD, mK.
@@ -84,8 +122,8 @@ pub struct CaptureResult {
     /// Chamfer between fitted and true object meshes, mm² (mean of both directions' mean
     /// squared point-to-surface distances), per object.
     pub object_chamfer_mm2: Vec<f64>,
-    /// Per variant name.
-    pub variants: BTreeMap<String, VariantResult>,
+    /// Per variant.
+    pub variants: BTreeMap<Variant, VariantResult>,
     /// Random baseline draws.
     pub random: Vec<Evaluation>,
 }
@@ -119,7 +157,7 @@ impl Progress for Silent {
 }
 
 /// The benchmark's captures: `(id, category, seed, netd_mk)`.
-pub fn captures(set: Set) -> Vec<(String, &'static str, u64, f64)> {
+pub fn captures(set: Set) -> Vec<(String, Category, u64, f64)> {
     let n = match set {
         Set::Quick => 4,
         Set::Full => 60,
@@ -147,7 +185,7 @@ pub fn captures(set: Set) -> Vec<(String, &'static str, u64, f64)> {
 /// (≥ 12 px with an ideal sensor).
 pub fn scene(
     model: &BodyModel,
-    category: &str,
+    category: Category,
     seed: u64,
     netd_mk: f64,
     first_attempt: u64,
@@ -156,13 +194,13 @@ pub fn scene(
         let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
         let phenotype = irmirror_sim::people::random_phenotype(&mut rng);
         let pose = irmirror_sim::people::random_pose(model, &mut rng);
-        let mut scene = if category == "car" {
+        let mut scene = if category == Category::Car {
             irmirror_sim::scene::car(&mut rng, pose, phenotype, ThermalPreset::Lepton)
         } else {
             let mut sc =
                 irmirror_sim::scene::tabletop(&mut rng, pose, phenotype, ThermalPreset::Lepton);
             sc.objects.retain(|o| o.shape.category() == category);
-            if category == "mug" && !sc.objects.is_empty() {
+            if category == Category::Mug && !sc.objects.is_empty() {
                 // A mug's side reflects near-horizontal rays only: from the preset's camera
                 // (55 cm above the table) they pass over the person's head. Lower the rig to
                 // 20 cm above the table, 40 cm from the mugs, as one films a mug; and a mug is a
@@ -213,20 +251,17 @@ pub struct Selection {
     /// Only the first N captures of each object type.
     pub limit: Option<usize>,
     /// Only this object type.
-    pub category: Option<String>,
+    pub category: Option<Category>,
     /// Only the full model.
     pub full_only: bool,
 }
 
 /// Runs the benchmark (the `selection` of it) into `out`.
 pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Result<()> {
-    if let Some(c) = &selection.category
-        && !CATEGORIES.contains(&c.as_str())
+    if let Some(c) = selection.category
+        && !CATEGORIES.contains(&c)
     {
-        bail!(
-            "--category {c}: the benchmark has {}",
-            CATEGORIES.join(", ")
-        );
+        bail!("--category {c}: the benchmark has bowl, mug and car");
     }
     let model = BodyModel::builtin()?;
     let prior = PosePrior::builtin(candle_core::DType::F64)?;
@@ -241,13 +276,13 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
             .map(|(_, c)| c)
             .collect();
     }
-    if let Some(c) = &selection.category {
-        list.retain(|x| x.1 == c.as_str());
+    if let Some(c) = selection.category {
+        list.retain(|x| x.1 == c);
     }
-    let variants: Vec<(&str, Option<Ablation>)> = VARIANTS
+    let variants: Vec<Variant> = Variant::ALL
         .iter()
         .copied()
-        .filter(|v| !selection.full_only || v.1.is_none())
+        .filter(|v| !selection.full_only || *v == Variant::Full)
         .collect();
     let bar = if progress {
         indicatif::ProgressBar::new((list.len() * variants.len()) as u64)
@@ -269,7 +304,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
         let cfg = ReconConfig::default();
         let mut first = 0;
         let (sc, sim, capture, pre, t0) = loop {
-            let (sc, attempt) = scene(&model, category, *seed, *netd, first)?;
+            let (sc, attempt) = scene(&model, *category, *seed, *netd, first)?;
             let sim = irmirror_sim::simulate(&model, &sc, *seed)?;
             let dir = scratch.join(id);
             sim.write(&model, &dir, *seed)?;
@@ -285,7 +320,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
         };
         let mut result = CaptureResult {
             id: id.clone(),
-            category: category.to_string(),
+            category: *category,
             seed: *seed,
             netd_mk: *netd,
             thermal_width: capture.thermal_camera.width,
@@ -307,10 +342,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
                     error: Some(format!("stage 1: {e}")),
                     time_s: 0.0,
                 };
-                result.variants = variants
-                    .iter()
-                    .map(|(n, _)| (n.to_string(), failed.clone()))
-                    .collect();
+                result.variants = variants.iter().map(|&v| (v, failed.clone())).collect();
                 bar.inc(variants.len() as u64);
                 results.push(result);
                 continue;
@@ -324,7 +356,8 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
             .collect::<Result<_>>()?;
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs)?;
-        for &(name, ablation) in &variants {
+        for &variant in &variants {
+            let (name, ablation) = (variant.heading(), variant.ablation());
             let cfg = ReconConfig {
                 ablate: ablation.into_iter().collect(),
                 ..ReconConfig::default()
@@ -344,7 +377,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
                 Err(e) => {
                     tracing::warn!("{id}: stage 2 ({name}) failed: {e}");
                     result.variants.insert(
-                        name.to_string(),
+                        variant,
                         VariantResult {
                             eval: None,
                             error: Some(e.to_string()),
@@ -371,7 +404,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
                 )?;
             }
             result.variants.insert(
-                name.to_string(),
+                variant,
                 VariantResult {
                     eval,
                     error: None,
@@ -419,7 +452,7 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
     write_text(
         &stage.path("run.toml"),
         &toml::to_string(
-            &serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "category": selection.category.clone().unwrap_or_else(|| "all".into()), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS }),
+            &serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "category": selection.category.map_or("all", Category::name), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS }),
         )?,
     )?;
     let dir = stage.commit()?;
@@ -438,11 +471,11 @@ fn cell(values: &[f64]) -> String {
 /// Table 1's layout: rows metric × object type, columns the ablations, the full model and Random.
 pub fn markdown_table(r: &Report) -> String {
     let mut s = String::from("| metric | object | n |");
-    for (name, _) in VARIANTS {
-        s.push_str(&format!(" {name} |"));
+    for v in Variant::ALL {
+        s.push_str(&format!(" {} |", v.heading()));
     }
     s.push_str(" random |\n|---|---|---|");
-    s.push_str(&"---|".repeat(VARIANTS.len() + 1));
+    s.push_str(&"---|".repeat(Variant::ALL.len() + 1));
     s.push('\n');
     for (metric, get) in METRICS {
         for cat in CATEGORIES {
@@ -452,12 +485,12 @@ pub fn markdown_table(r: &Report) -> String {
                 continue;
             }
             s.push_str(&format!("| {metric} | {cat} | {} |", caps.len()));
-            for (name, _) in VARIANTS {
+            for variant in Variant::ALL {
                 let v: Vec<f64> = caps
                     .iter()
                     .filter_map(|c| {
                         c.variants
-                            .get(name)
+                            .get(&variant)
                             .and_then(|x| x.eval.as_ref())
                             .and_then(get)
                     })
@@ -484,15 +517,15 @@ pub fn markdown_table(r: &Report) -> String {
             "| failed reconstructions | {cat} | {} |",
             caps.len()
         ));
-        for (name, _) in VARIANTS {
+        for variant in Variant::ALL {
             // A variant left out (`--full-only`) did not fail: it did not run.
-            if caps.iter().all(|c| !c.variants.contains_key(name)) {
+            if caps.iter().all(|c| !c.variants.contains_key(&variant)) {
                 s.push_str(" – |");
             } else {
                 s.push_str(&format!(
                     " {} |",
                     caps.iter()
-                        .filter(|c| c.variants.get(name).is_some_and(|v| v.eval.is_none()))
+                        .filter(|c| c.variants.get(&variant).is_some_and(|v| v.eval.is_none()))
                         .count()
                 ));
             }
@@ -505,7 +538,7 @@ pub fn markdown_table(r: &Report) -> String {
         if caps.is_empty() {
             continue;
         }
-        let full = |c: &&CaptureResult| c.variants.get("full model").cloned();
+        let full = |c: &&CaptureResult| c.variants.get(&Variant::Full).cloned();
         let full_eval = |c: &&CaptureResult| full(c).and_then(|v| v.eval);
         let t: Vec<f64> = caps
             .iter()
@@ -543,7 +576,7 @@ pub fn markdown_table(r: &Report) -> String {
 fn html(r: &Report, table: &str) -> String {
     let mut rows = String::new();
     for c in &r.captures {
-        let full = c.variants.get("full model").and_then(|v| v.eval.as_ref());
+        let full = c.variants.get(&Variant::Full).and_then(|v| v.eval.as_ref());
         let f = |x: Option<f64>| x.map_or("n/a".into(), |v| format!("{v:.3}"));
         rows.push_str(&format!(
             "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td><img src=\"captures/{}/overlay.png\" width=\"160\"></td><td><img src=\"captures/{}/third.png\" width=\"160\"></td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
@@ -607,7 +640,7 @@ mod tests {
         let captures = (0..3)
             .map(|k| CaptureResult {
                 id: format!("mug_{k:02}"),
-                category: "mug".into(),
+                category: Category::Mug,
                 seed: k,
                 netd_mk: 50.0,
                 thermal_width: 160,
@@ -615,13 +648,13 @@ mod tests {
                 person_distance_m: 2.0,
                 objects_time_s: 0.5,
                 object_chamfer_mm2: vec![0.25],
-                variants: VARIANTS
+                variants: Variant::ALL
                     .iter()
-                    .map(|(n, a)| {
+                    .map(|&v| {
                         // One failure: the full model on the last capture.
-                        let failed = a.is_none() && k == 2;
+                        let failed = v == Variant::Full && k == 2;
                         (
-                            n.to_string(),
+                            v,
                             VariantResult {
                                 eval: (!failed).then(|| eval(k as f64)),
                                 error: failed.then(|| "x".to_string()),
@@ -670,7 +703,7 @@ mod tests {
         assert_eq!(captures(Set::Full).len(), 180);
         assert_eq!(
             captures(Set::Quick)[4],
-            ("mug_00".to_string(), "mug", SEED_BASE + 1000, 50.0)
+            ("mug_00".to_string(), Category::Mug, SEED_BASE + 1000, 50.0)
         );
     }
 }

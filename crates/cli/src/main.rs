@@ -15,6 +15,7 @@ mod sdf_cmd;
 mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
+use irmirror_geom::Category;
 use std::path::PathBuf;
 
 /// irmirror — 3D human position and pose from thermal reflections in everyday curved objects
@@ -138,8 +139,8 @@ enum Command {
         #[arg(long)]
         limit: Option<usize>,
         /// Only this object type (bowl, mug or car).
-        #[arg(long)]
-        category: Option<String>,
+        #[arg(long, value_enum)]
+        category: Option<Category>,
         /// Only the full model (no ablation columns): four times faster.
         #[arg(long)]
         full_only: bool,
@@ -153,8 +154,8 @@ enum Command {
     /// Deterministic for a seed.
     TrainSdf {
         /// Category: bowl, mug or car.
-        #[arg(long)]
-        category: String,
+        #[arg(long, value_enum)]
+        category: Category,
         /// A directory of extra training meshes (.obj, .ply, .stl).
         #[arg(long)]
         meshes: Option<PathBuf>,
@@ -303,7 +304,7 @@ fn main() -> std::process::ExitCode {
             width,
         } => sdf_cmd::run(
             sdf_cmd::Options {
-                category: &category,
+                category,
                 meshes: meshes.as_deref(),
                 out: &out,
                 cfg: irmirror_sdf::train::TrainSdfConfig {

@@ -163,7 +163,7 @@ pub fn run(
                     &st.path(&format!("objects/object_{k}_mask.png")),
                 )?;
             }
-            let params = serde_json::json!({"frame": "depth camera (OpenCV axes), metres", "support_plane": objs.plane, "objects": objs.objects, "segmented": objs.segmented});
+            let params = serde_json::json!({"frame": "depth camera (OpenCV axes), metres", "up": objs.ground.up, "support_plane": objs.ground.plane, "objects": objs.objects, "segmented": objs.segmented});
             write_text(
                 &st.path("objects.json"),
                 &serde_json::to_string_pretty(&params)?,

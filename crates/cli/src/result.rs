@@ -262,7 +262,7 @@ pub fn write(
         .iter()
         .fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation)
         / placed.len().max(1) as f64;
-    let overview = overview_camera(&rec.objects.plane.n(), &centre, &best);
+    let overview = overview_camera(&rec.objects.ground.n(), &centre, &best);
     let img = render_view(
         &overview.0,
         &overview.1,
@@ -283,7 +283,8 @@ pub fn write(
         .collect::<Result<_, _>>()?;
     let params = serde_json::json!({
         "frame": "depth camera (OpenCV axes: +X right, +Y down, +Z forward), metres",
-        "support_plane": rec.objects.plane,
+        "up": rec.objects.ground.up,
+        "support_plane": rec.objects.ground.plane,
         "objects": rec.objects.objects,
         "human": {
             "note": "The reflection constrains the person only partly: several placements can explain a small reflection. hypotheses[0] is the best by loss; the others are distinct (root > 25 cm apart or facing > 45° apart) and nearly as good when their losses are close.",

@@ -11,8 +11,8 @@ use std::sync::Arc;
 
 /// Options of `train-sdf`.
 pub struct Options<'a> {
-    /// Category name.
-    pub category: &'a str,
+    /// Category (one with a learned prior).
+    pub category: Category,
     /// Extra user meshes.
     pub meshes: Option<&'a Path>,
     /// Output weights.
@@ -40,7 +40,10 @@ fn bar(progress: bool, len: u64, what: &str) -> indicatif::ProgressBar {
 
 /// Runs the command.
 pub fn run(o: Options, progress: bool) -> Result<()> {
-    let category = Category::parse(o.category)?;
+    let category = o.category;
+    if !category.has_learned_prior() {
+        bail!("--category {category}: priors are trained for bowl, mug and car");
+    }
     if o.cfg.steps == 0 || o.cfg.samples_per_shape < 100 || o.cfg.points_per_shape == 0 {
         bail!("--steps must be positive and --samples at least 100");
     }
@@ -73,7 +76,7 @@ pub fn run(o: Options, progress: bool) -> Result<()> {
     let b = bar(progress, o.cfg.shapes as u64, "meshing + sampling");
     let mut data = Vec::new();
     // One shape at a time: bounded memory for the fine procedural meshes.
-    for (k, shape) in procedural_params(category, o.cfg.shapes, o.cfg.seed, 1)
+    for (k, shape) in procedural_params(category, o.cfg.shapes, o.cfg.seed, 1)?
         .into_iter()
         .enumerate()
     {

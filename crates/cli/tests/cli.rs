@@ -308,7 +308,7 @@ fn simulate_writes_a_loadable_deterministic_capture() {
         assert!(ta.iter().any(|(n, _)| n == f), "missing {f}");
     }
     let cap = irmirror_capture::Capture::load(&a).unwrap();
-    assert_eq!(cap.objects[0].category, "car");
+    assert_eq!(cap.objects[0].category, irmirror_geom::Category::Car);
     // Re-simulating from the written scene reproduces the capture.
     let c = tmp("sim-c");
     let o = irmirror(&[

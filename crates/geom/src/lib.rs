@@ -15,11 +15,13 @@
 //! float trait) live here while they stay tiny.
 
 pub mod camera;
+pub mod category;
 pub mod error;
 pub mod gltf;
 pub mod isosurface;
 pub mod mesh;
 pub mod obj;
+pub mod optim;
 pub mod ply;
 pub mod raster;
 pub mod ray;
@@ -29,6 +31,7 @@ pub mod rotation;
 pub mod transform;
 
 pub use camera::PinholeCamera;
+pub use category::{CAR_LENGTH_M, Category};
 pub use error::GeomError;
 pub use mesh::TriMesh;
 pub use ray::Ray;

@@ -25,11 +25,12 @@ use irmirror_body::model::{BodyGrad, OutputGrads};
 use irmirror_body::prior::PosePrior;
 use irmirror_body::{BodyModel, Pose};
 use irmirror_capture::Image;
+use irmirror_geom::optim::{Adam, AdamParams, CosineDecay};
 use irmirror_geom::rotation::{
     axis_angle_to_matrix, axis_angle_to_matrix_vjp, matrix_to_axis_angle,
 };
 use irmirror_render::occupancy::{
-    Aggregation, Culling, OccupancyGrad, OccupancyParams, SoftRenderer,
+    Aggregation, Culling, OccupancyGrad, OccupancyParams, SoftRenderer, soft_iou,
 };
 use irmirror_render::reflect::ReflectedRays;
 use nalgebra::{Matrix3, Vector3};
@@ -234,23 +235,6 @@ pub fn edge_distance(mask: &Image<bool>) -> Image<f64> {
     }
 }
 
-/// Soft IoU of occupancies `v` against targets `t` (same rays) and `∂(1 − IoU)/∂v`.
-fn soft_iou(v: &[f64], t: &[f64], d: &mut Vec<f64>) -> (f64, f64) {
-    let (mut inter, mut union) = (0.0, 0.0);
-    for (&a, &b) in v.iter().zip(t) {
-        inter += a * b;
-        union += a + b - a * b;
-    }
-    d.clear();
-    if union <= 0.0 {
-        d.resize(v.len(), 0.0);
-        return (1.0, 0.0);
-    }
-    let u2 = union * union;
-    d.extend(t.iter().map(|&b| -(b * union - inter * (1.0 - b)) / u2));
-    (1.0 - inter / union, inter / union)
-}
-
 /// A rotation taking Anny's +Z (up) to `up` and Anny's front (−Y) towards `facing` (projected
 /// onto the plane).
 pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> {
@@ -278,34 +262,6 @@ pub fn mean_adult(model: &BodyModel) -> Result<irmirror_body::ShapedBody<f64>, R
     model
         .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
         .map_err(|e| ReconError::Prior(e.to_string()))
-}
-
-/// Adam state over a flat parameter vector.
-struct Adam {
-    m: Vec<f64>,
-    v: Vec<f64>,
-    t: i32,
-}
-
-impl Adam {
-    fn new(n: usize) -> Self {
-        Self {
-            m: vec![0.0; n],
-            v: vec![0.0; n],
-            t: 0,
-        }
-    }
-    fn step(&mut self, g: &[f64], lr: &[f64], out: &mut [f64]) {
-        self.t += 1;
-        let (b1, b2) = (0.9f64, 0.999f64);
-        for k in 0..g.len() {
-            self.m[k] = b1 * self.m[k] + (1.0 - b1) * g[k];
-            self.v[k] = b2 * self.v[k] + (1.0 - b2) * g[k] * g[k];
-            let mh = self.m[k] / (1.0 - b1.powi(self.t));
-            let vh = self.v[k] / (1.0 - b2.powi(self.t));
-            out[k] = lr[k] * mh / (vh.sqrt() + 1e-10);
-        }
-    }
 }
 
 /// The state of one hypothesis.
@@ -386,7 +342,7 @@ impl HumanProblem<'_> {
             ..OccupancyParams::default()
         };
         let occ = r.forward(rays, &params, Culling::Bvh);
-        let (l_iou, iou) = soft_iou(&occ.value, target, &mut ws.d_value);
+        let (l_iou, iou) = soft_iou(&occ.value, |i| target[i], 0.0, &mut ws.d_value);
         let prior: f64 = latent.iter().map(|x| x * x).sum();
         let up = self.up.normalize();
         let mut loss = l_iou
@@ -565,7 +521,7 @@ impl HumanProblem<'_> {
         let base = st.rotation;
         let mut omega = Vector3::zeros();
         let n_lat = st.latent.len();
-        let mut adam = Adam::new(6 + n_lat);
+        let mut adam = Adam::new(6 + n_lat, AdamParams::default());
         let mut lr = vec![cfg.lr_translation; 3];
         lr.extend([cfg.lr_rotation; 3]);
         lr.extend(vec![cfg.lr_latent; n_lat]);
@@ -632,9 +588,9 @@ impl HumanProblem<'_> {
                 return Ok(None);
             }
             curve.push(loss);
-            adam.step(&g, &lr, &mut step);
+            adam.step(&g, &lr, 1.0, &mut step);
             // Learning rates decay by cosine to 10 %.
-            let decay = 0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos());
+            let decay = CosineDecay { floor: 0.1 }.at(progress);
             st.translation -= Vector3::new(step[0], step[1], step[2]) * decay;
             omega -= Vector3::new(step[3], step[4], step[5]) * decay;
             for k in 0..n_lat {
@@ -689,7 +645,10 @@ pub fn fit_human(
         }
     }
     if done.is_empty() {
-        return Err(ReconError::Diverged { inits: diverged });
+        return Err(ReconError::Diverged {
+            stage: "human fit",
+            runs: diverged,
+        });
     }
     let mut scored: Vec<(Hypothesis, HumanState)> = done
         .into_par_iter()

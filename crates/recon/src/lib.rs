@@ -27,14 +27,6 @@ pub enum ReconError {
         "no object pixel of the capture falls inside the thermal image: check the masks and depth_from_thermal"
     )]
     NoObjectPixels,
-    /// An object category without a prior.
-    #[error("no shape prior for object category {category:?} (known: {known})")]
-    UnknownCategory {
-        /// The category asked for.
-        category: String,
-        /// The known ones.
-        known: String,
-    },
     /// An object mask covers (almost) no valid depth.
     #[error("an object mask covers only {pixels} pixels with valid depth (at least 10 are needed)")]
     EmptyObject {
@@ -61,13 +53,14 @@ pub enum ReconError {
         "no pixel of the reflection mask lies on a fitted object, so no reflected ray can see the person; check the object fit (stage 1) and depth_from_thermal"
     )]
     NoMaskRays,
-    /// Every initialisation of the human fit diverged.
-    #[error(
-        "the human fit diverged from all {inits} initialisations (non-finite loss or gradient)"
-    )]
+    /// Every run of a fit diverged (non-finite loss or gradient): a failed result, never a
+    /// silently kept last finite state.
+    #[error("the {stage} diverged in all {runs} runs (non-finite loss or gradient)")]
     Diverged {
-        /// Initialisations tried.
-        inits: usize,
+        /// Which fit (`object fit`, `human fit`).
+        stage: &'static str,
+        /// Runs (restarts, initialisations) tried.
+        runs: usize,
     },
     /// The body model or pose prior failed.
     #[error("body model / pose prior: {0}")]

@@ -93,7 +93,7 @@ pub trait Progress: Sync {
 pub fn unblocked(
     rays: &ReflectedRays<f64>,
     objects: &[irmirror_render::sdf::PlacedSdf],
-    plane: &crate::plane::Plane,
+    plane: Option<&crate::plane::Plane>,
     trace: &TraceParams,
 ) -> ReflectedRays<f64> {
     use rayon::prelude::*;
@@ -116,7 +116,7 @@ pub fn unblocked(
             {
                 return false;
             }
-            if plane.found {
+            if let Some(plane) = plane {
                 let n = plane.n();
                 let denom = n.dot(&ray.dir);
                 if denom < -1e-9 {
@@ -146,7 +146,7 @@ pub const PLANE_BLOCK_M: f64 = 0.6;
 /// The floor the person stands on: the ground under a fitted car, else `table_height_m` below
 /// a support plane seen in the depth image; `None` without either (up alone gives no height).
 pub fn floor(objects: &Objects, cfg: &HumanConfig) -> Option<Floor> {
-    let up = objects.plane.n().normalize();
+    let up = objects.ground.n().normalize();
     let car = objects
         .objects
         .iter()
@@ -159,9 +159,9 @@ pub fn floor(objects: &Objects, cfg: &HumanConfig) -> Option<Floor> {
             offset_m: up.dot(&base),
         });
     }
-    objects.plane.found.then_some(Floor {
+    objects.ground.plane.map(|plane| Floor {
         up,
-        offset_m: objects.plane.offset_m - cfg.table_height_m,
+        offset_m: plane.offset_m - cfg.table_height_m,
     })
 }
 
@@ -216,7 +216,7 @@ pub fn reflected_rays(
             &missed,
         ));
     }
-    unblocked(&all_rays, &placed, &objects.plane, &trace)
+    unblocked(&all_rays, &placed, objects.ground.plane.as_ref(), &trace)
 }
 
 /// Stage 2 (reflected rays, then the person) on given stage 0–1 results: the evaluation runs
@@ -244,7 +244,7 @@ pub fn reconstruct_human(
         prior,
         rays: &rays,
         mask: &pre.mask,
-        up: objects.plane.n(),
+        up: objects.ground.n(),
         objects_centre: centre,
         floor: floor(&objects, &hcfg),
     };

@@ -16,25 +16,43 @@ pub struct Plane {
     pub offset_m: f64,
     /// Fraction of the candidate points within the inlier band.
     pub inlier_fraction: f64,
-    /// False when no plane was found and this one is assumed: the camera's up (−Y), through
-    /// the origin; only its normal is used then.
-    pub found: bool,
 }
 
-impl Plane {
-    /// The stand-in when the depth image shows no support plane: up = the camera's −Y.
+/// What stage 1 knows of the ground: "up" always (the support plane's normal, else the IMU's up,
+/// else the camera's −Y), and the support plane where the depth image shows one.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Ground {
+    /// Unit vector against gravity, depth frame.
+    pub up: [f64; 3],
+    /// The support plane (table top, ground), if one was found.
+    pub plane: Option<Plane>,
+}
+
+impl Ground {
+    /// A found support plane: up is its normal.
+    pub fn plane(plane: Plane) -> Self {
+        Self {
+            up: plane.normal,
+            plane: Some(plane),
+        }
+    }
+
+    /// No support plane, up known (IMU): the direction only, no height.
+    pub fn up_only(up: Vector3<f64>) -> Self {
+        Self {
+            up: up.normalize().into(),
+            plane: None,
+        }
+    }
+
+    /// No support plane and no IMU: up = the camera's −Y.
     pub fn camera_up() -> Self {
         Self::up_only(-Vector3::y())
     }
-    /// The stand-in when the depth image shows no support plane but the capture knows "up"
-    /// (IMU): the direction only, no height.
-    pub fn up_only(up: Vector3<f64>) -> Self {
-        Self {
-            normal: up.normalize().into(),
-            offset_m: 0.0,
-            inlier_fraction: 0.0,
-            found: false,
-        }
+
+    /// Up as a vector.
+    pub fn n(&self) -> Vector3<f64> {
+        Vector3::from(self.up)
     }
 }
 
@@ -149,7 +167,6 @@ pub fn fit_plane(
         normal: m.into(),
         offset_m: off,
         inlier_fraction: inliers as f64 / points.len() as f64,
-        found: true,
     })
 }
 

@@ -276,7 +276,6 @@ mod tests {
             normal: [0.0, -1.0, 0.0],
             offset_m: 0.0,
             inlier_fraction: 1.0,
-            found: true,
         };
         let mut points = vec![None; (w * h) as usize];
         let mut cluster = Image::filled(w, h, false);

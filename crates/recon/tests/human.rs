@@ -64,12 +64,7 @@ fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> Reflected
         &Default::default(),
         irmirror_render::reflect::Normals::Raw,
     );
-    irmirror_recon::pipeline::unblocked(
-        &all,
-        &objs,
-        &irmirror_recon::plane::Plane::camera_up(),
-        &Default::default(),
-    )
+    irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
 }
 
 /// The true root rotation (Anny → depth) and the body's up, depth frame.

@@ -584,32 +584,50 @@ impl<T: Real> SoftRenderer<T> {
     }
 }
 
-/// `1 − soft IoU` between per-ray occupancy (scattered to pixels; 0 where no ray) and a target
-/// mask over all pixels, and `∂L/∂I_i` per ray.
+/// Soft IoU of occupancies `occupancy[i]` against targets `target(i)`, both in [0, 1]:
+/// `IoU = Σ vt / (union_outside + Σ (v + t − vt))`, where `union_outside` is the target mass of
+/// pixels no element covers. Returns `(1 − IoU, IoU)` and writes `∂(1 − IoU)/∂v_i` into
+/// `d_value`. Two empty masks agree: an empty union gives loss 0, IoU 1 and zero gradients.
+/// Stage 2 (targets per sampled ray) and [`soft_iou_loss`] (a target over all pixels) use it.
+pub fn soft_iou<T: Real>(
+    occupancy: &[T],
+    target: impl Fn(usize) -> T,
+    union_outside: T,
+    d_value: &mut Vec<T>,
+) -> (T, T) {
+    let (mut inter, mut union) = (T::zero(), union_outside);
+    for (i, &v) in occupancy.iter().enumerate() {
+        let t = target(i);
+        inter += v * t;
+        union += v + t - v * t;
+    }
+    d_value.clear();
+    if union <= T::zero() {
+        d_value.resize(occupancy.len(), T::zero());
+        return (T::zero(), T::one());
+    }
+    let u2 = union * union;
+    d_value.extend((0..occupancy.len()).map(|i| {
+        let t = target(i);
+        -(t * union - inter * (T::one() - t)) / u2
+    }));
+    (T::one() - inter / union, inter / union)
+}
+
+/// `1 − soft IoU` ([`soft_iou`]) between per-ray occupancy (scattered to pixels; 0 where no
+/// ray) and a target mask over all pixels, and `∂L/∂I_i` per ray. One ray per pixel.
 pub fn soft_iou_loss<T: Real>(
     rays: &ReflectedRays<T>,
     occupancy: &[T],
     target: &[T],
     d_value: &mut Vec<T>,
 ) -> T {
-    // Σ over pixels without rays: I = 0 there, so only the target adds to the union.
-    let target_sum: T = target.iter().fold(T::zero(), |a, &t| a + t);
-    let mut inter = T::zero();
-    let mut union = target_sum;
-    for (i, &v) in occupancy.iter().enumerate() {
-        let t = target[rays.pixel[i] as usize];
-        inter += v * t;
-        union += v - v * t;
-    }
-    d_value.clear();
-    if union <= T::zero() {
-        d_value.resize(occupancy.len(), T::zero());
-        return T::zero();
-    }
-    let u2 = union * union;
-    d_value.extend(rays.pixel.iter().map(|&p| {
-        let t = target[p as usize];
-        -(t * union - inter * (T::one() - t)) / u2
-    }));
-    T::one() - inter / union
+    // Pixels without rays: I = 0 there, so only their target adds to the union.
+    let all: T = target.iter().fold(T::zero(), |a, &t| a + t);
+    let covered: T = rays
+        .pixel
+        .iter()
+        .fold(T::zero(), |a, &p| a + target[p as usize]);
+    let target_of = |i: usize| target[rays.pixel[i] as usize];
+    soft_iou(occupancy, target_of, all - covered, d_value).0
 }

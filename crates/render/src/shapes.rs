@@ -3,6 +3,7 @@
 //! fits them (a low-dimensional shape prior until the learned DeepSDF priors of issue 4 land).
 
 use crate::sdf::{Bowl, Sdf};
+use irmirror_geom::Category;
 use nalgebra::{Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -37,13 +38,13 @@ pub enum Shape {
 }
 
 impl Shape {
-    /// The category name used in captures.
-    pub fn category(&self) -> &'static str {
+    /// The category.
+    pub fn category(&self) -> Category {
         match self {
-            Shape::Sphere => "sphere",
-            Shape::Bowl { .. } => "bowl",
-            Shape::Mug { .. } => "mug",
-            Shape::Car { .. } => "car",
+            Shape::Sphere => Category::Sphere,
+            Shape::Bowl { .. } => Category::Bowl,
+            Shape::Mug { .. } => Category::Mug,
+            Shape::Car { .. } => Category::Car,
         }
     }
 

@@ -2,7 +2,7 @@
 //! from the bounding sphere, then K sphere-tracing steps — or, for the "w/o sphere tracing"
 //! ablation, a projection of the coarse point along the SDF gradient (Zakharov et al. 2020).
 
-use crate::sdf::PlacedSdf;
+use crate::sdf::{PlacedSdf, Sdf};
 use irmirror_geom::Ray;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -60,36 +60,8 @@ pub fn trace(object: &PlacedSdf, ray_depth: &Ray<f64>, params: &TraceParams) -> 
     // March in the object frame: unit direction there too, so t_object = t_depth / s.
     let o = sim.inverse_transform_point(&ray_depth.origin);
     let r = sim.rotation.tr_mul(&ray_depth.dir);
-    let radius = object.sdf.bounding_radius();
-    // Bounding-sphere entry and exit.
-    let b = o.dot(&r);
-    let c = o.norm_squared() - radius * radius;
-    let disc = b * b - c;
-    if disc < 0.0 {
-        return None;
-    }
-    let sq = disc.sqrt();
-    let (t_exit, mut t) = (-b + sq, (-b - sq).max(0.0));
-    if t_exit < 0.0 {
-        return None;
-    }
-    let tol = params.coarse_tol_rel * radius;
-    let mut hit = false;
-    for _ in 0..params.max_iters {
-        let d = object.sdf.distance(&(o + r * t));
-        if d < tol {
-            hit = true;
-            break;
-        }
-        // Stepping by d never crosses the surface of a 1-Lipschitz field.
-        t += d;
-        if t > t_exit {
-            return None;
-        }
-    }
-    if !hit {
-        return None;
-    }
+    let tol = params.coarse_tol_rel * object.sdf.bounding_radius();
+    let mut t = march(object.sdf.as_ref(), &o, &r, tol, params.max_iters)?;
     let t_coarse = t;
     let p_object = match params.method {
         SurfaceMethod::SphereTrace { steps } => {
@@ -110,6 +82,45 @@ pub fn trace(object: &PlacedSdf, ray_depth: &Ray<f64>, params: &TraceParams) -> 
         point,
         normal: object.normal(&point),
     })
+}
+
+/// Sphere-traces the unit ray `o + t r` (object frame, `t ≥ 0`) into `sdf` from where it enters
+/// the bounding sphere, stepping `t += d` until `d < tol` (object units): the distance `t` there,
+/// or `None` when the ray misses the bounding sphere, leaves it, or `max_iters` steps pass.
+/// [`trace`]'s coarse march (a loose `tol`, then refinement) and stage 1's rendered depth (a
+/// tight `tol`) both use it.
+pub fn march(
+    sdf: &dyn Sdf,
+    o: &Vector3<f64>,
+    r: &Vector3<f64>,
+    tol: f64,
+    max_iters: usize,
+) -> Option<f64> {
+    let radius = sdf.bounding_radius();
+    // Bounding-sphere entry and exit.
+    let b = o.dot(r);
+    let c = o.norm_squared() - radius * radius;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let sq = disc.sqrt();
+    let (t_exit, mut t) = (-b + sq, (-b - sq).max(0.0));
+    if t_exit < 0.0 {
+        return None;
+    }
+    for _ in 0..max_iters {
+        let d = sdf.distance(&(o + r * t));
+        if d < tol {
+            return Some(t);
+        }
+        // Stepping by d never crosses the surface of a 1-Lipschitz field.
+        t += d;
+        if t > t_exit {
+            return None;
+        }
+    }
+    None
 }
 
 #[cfg(test)]

@@ -17,39 +17,7 @@ use serde::{Deserialize, Serialize};
 /// Half-diagonal of a normalised shape's bounding box (the surface lies inside this sphere).
 pub const NORMALISED_RADIUS: f64 = 0.9;
 
-/// An object category with a trained prior.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Category {
-    /// Bowls: thin shells of revolution.
-    Bowl,
-    /// Mugs: straight or tapered cups with a handle.
-    Mug,
-    /// Cars: sedans, hatchbacks and SUVs.
-    Car,
-}
-
-impl Category {
-    /// Every category.
-    pub const ALL: [Category; 3] = [Category::Bowl, Category::Mug, Category::Car];
-
-    /// The name used in captures and on the command line.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Category::Bowl => "bowl",
-            Category::Mug => "mug",
-            Category::Car => "car",
-        }
-    }
-
-    /// Parses a category name.
-    pub fn parse(name: &str) -> Result<Self, SdfError> {
-        Self::ALL
-            .into_iter()
-            .find(|c| c.name() == name)
-            .ok_or_else(|| SdfError::UnknownCategory(name.to_string()))
-    }
-}
+pub use irmirror_geom::Category;
 
 /// Bowl parameters (raw units: rim radius 1). The wall is a shell of constant thickness around
 /// the profile curve `ρ(s) = s (1 + flare s⁶)`, `y(s) = depth sᵉ`, s ∈ [0, 1], revolved about +Y.
@@ -257,9 +225,10 @@ impl FamilyShape {
         }
     }
 
-    /// A member drawn uniformly from the documented parameter ranges.
-    pub fn sample(category: Category, rng: &mut impl Rng) -> Self {
-        match category {
+    /// A member drawn uniformly from the documented parameter ranges (categories with a
+    /// learned prior only).
+    pub fn sample(category: Category, rng: &mut impl Rng) -> Result<Self, SdfError> {
+        Ok(match category {
             Category::Bowl => {
                 let foot = rng.random_bool(0.6);
                 FamilyShape::Bowl(BowlParams {
@@ -299,7 +268,8 @@ impl FamilyShape {
                     wheelbase: uniform(rng, 0.55, 0.7),
                 })
             }
-        }
+            Category::Sphere => return Err(SdfError::NoPrior(category)),
+        })
     }
 
     /// Raw-unit bounding box `(lo, hi)` of the surface.

@@ -8,8 +8,9 @@
 use crate::SdfError;
 use crate::mesh_sdf::SdfSamples;
 use crate::net::{self, SdfNet};
+use crate::var_adam::VarAdam;
 use candle_core::{Device, Tensor, Var};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use irmirror_geom::optim::CosineDecay;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -63,14 +64,7 @@ fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfE
     let l = net.latent_dim;
     let z0: Vec<f32> = net.mean_latent().iter().map(|v| *v as f32).collect();
     let z = Var::from_tensor(&Tensor::from_vec(z0, (1, l), &dev)?)?;
-    let mut opt = AdamW::new(
-        vec![z.clone()],
-        ParamsAdamW {
-            lr: cfg.lr,
-            weight_decay: 0.0,
-            ..Default::default()
-        },
-    )?;
+    let mut opt = VarAdam::new(&z, cfg.lr);
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 11);
     let (n_all, n_surface) = match &target {
         Target::Samples(s) => (s.points.len(), s.points.len()),
@@ -90,9 +84,7 @@ fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfE
     };
     let mut last = f64::NAN;
     for step in 0..cfg.steps {
-        let decay = 0.05
-            + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / cfg.steps as f64).cos());
-        opt.set_learning_rate(cfg.lr * decay);
+        let decay = CosineDecay { floor: 0.05 }.at_step(step, cfg.steps);
         let pick: Vec<usize> = if n_all <= cfg.batch {
             (0..n_all).collect()
         } else {
@@ -130,7 +122,7 @@ fn run(net: &SdfNet, target: Target, cfg: &InferConfig) -> Result<Inferred, SdfE
                 .sqr()?
                 .sum_all()?
                 .affine(cfg.latent_reg, 0.0)?)?;
-        opt.backward_step(&loss)?;
+        opt.step(&loss.backward()?, decay)?;
         last = f64::from(data.to_scalar::<f32>()?);
         if !last.is_finite() {
             return Err(SdfError::Invalid(format!(

@@ -23,6 +23,7 @@ pub mod net;
 pub mod placed;
 pub mod quality;
 pub mod train;
+mod var_adam;
 
 pub use families::{Category, FamilyShape};
 pub use mesh_sdf::{MeshSdf, SdfSamples};
@@ -50,9 +51,9 @@ pub enum SdfError {
         /// What is wrong.
         reason: String,
     },
-    /// An unknown category name.
-    #[error("unknown object category `{0}` (known: bowl, mug, car)")]
-    UnknownCategory(String),
+    /// A category without a learned prior (a sphere).
+    #[error("no learned prior for the category `{0}` (there are priors for bowl, mug and car)")]
+    NoPrior(Category),
     /// Invalid arguments (empty sample set, wrong latent length …).
     #[error("{0}")]
     Invalid(String),

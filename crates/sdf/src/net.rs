@@ -130,10 +130,10 @@ impl SdfNet {
                 )),
             ]
         });
-        let k = Category::ALL
+        let k = Category::LEARNED
             .iter()
             .position(|c| *c == category)
-            .expect("every category has a prior");
+            .ok_or(SdfError::NoPrior(category))?;
         cache[k].clone().map_err(|reason| SdfError::Weights {
             path: format!("built-in {} prior", category.name()),
             reason,
@@ -165,8 +165,11 @@ impl SdfNet {
             .unwrap_or_default()
             .into_iter()
             .collect();
-        let category = Category::parse(metadata.get("category").map(String::as_str).unwrap_or(""))
-            .map_err(|_| bad("metadata has no known `category`".into()))?;
+        let category = metadata
+            .get("category")
+            .and_then(|c| c.parse::<Category>().ok())
+            .filter(|c| c.has_learned_prior())
+            .ok_or_else(|| bad("metadata has no known `category`".into()))?;
         let get = |name: &str| -> Result<(Vec<usize>, Vec<f32>), SdfError> {
             let t = st
                 .tensor(name)

@@ -16,9 +16,10 @@
 
 use crate::SdfError;
 use crate::net::{self, SdfNet};
+use crate::var_adam::VarAdam;
 use candle_core::{DType, Device, Tensor, Var};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use irmirror_geom::Similarity3;
+use irmirror_geom::optim::CosineDecay;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
@@ -293,22 +294,14 @@ pub fn fit_placed(
     let dt = DType::F32;
     let layers = net.tensors(&Device::Cpu)?;
     let v = vars(latent, dt)?;
-    let adam = |var: &Var, lr: f64| {
-        AdamW::new(
-            vec![var.clone()],
-            ParamsAdamW {
-                lr,
-                weight_decay: 0.0,
-                ..Default::default()
-            },
-        )
-    };
-    let mut opts = [
-        (adam(&v.z, cfg.lr_latent)?, cfg.lr_latent, false),
-        (adam(&v.delta, cfg.lr_rotation)?, cfg.lr_rotation, true),
-        (adam(&v.tau, cfg.lr_translation)?, cfg.lr_translation, true),
-        (adam(&v.log_s, cfg.lr_scale)?, cfg.lr_scale, true),
+    // (group, part of the placement: frozen during the latent-only steps)
+    let mut groups = [
+        (VarAdam::new(&v.z, cfg.lr_latent), false),
+        (VarAdam::new(&v.delta, cfg.lr_rotation), true),
+        (VarAdam::new(&v.tau, cfg.lr_translation), true),
+        (VarAdam::new(&v.log_s, cfg.lr_scale), true),
     ];
+    let schedule = CosineDecay { floor: 0.05 };
     let mut frame = Frame {
         net: &layers,
         r0: init.rotation,
@@ -337,8 +330,7 @@ pub fn fit_placed(
         } else {
             (step, cfg.latent_steps)
         };
-        let decay =
-            0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * k as f64 / n.max(1) as f64).cos());
+        let decay = schedule.at_step(k, n);
         let (surface, free, inside) = (
             draw(obs.surface, &mut rng),
             draw(obs.free, &mut rng),
@@ -353,12 +345,11 @@ pub fn fit_placed(
         }
         curve.push(value);
         let grads = loss.backward()?;
-        for (opt, lr, placement) in &mut opts {
+        for (group, placement) in &mut groups {
             if *placement && !joint {
                 continue;
             }
-            opt.set_learning_rate(*lr * decay);
-            opt.step(&grads)?;
+            group.step(&grads, decay)?;
         }
         // Fold the rotation step into R₀.
         let d = v

@@ -69,7 +69,7 @@ pub fn held_out(
     cfg: &InferConfig,
     mut progress: impl FnMut(usize),
 ) -> Result<HeldOutFigures, SdfError> {
-    let truth = crate::train::procedural(net.category, n, seed, 2, 112);
+    let truth = crate::train::procedural(net.category, n, seed, 2, 112)?;
     let (mut ch, mut eik, mut l1, mut t_inf, mut bbox) = (Vec::new(), 0.0, 0.0, 0.0, 0.0);
     let (mut pps, mut bpps) = (0.0, 0.0);
     for (k, (_, mesh)) in truth.iter().enumerate() {

@@ -11,6 +11,7 @@ use crate::net::{self, SdfNet};
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use irmirror_geom::TriMesh;
+use irmirror_geom::optim::CosineDecay;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
@@ -87,15 +88,20 @@ pub fn procedural(
     seed: u64,
     stream: u64,
     resolution: usize,
-) -> Vec<(FamilyShape, TriMesh)> {
-    procedural_params(category, n, seed, stream)
+) -> Result<Vec<(FamilyShape, TriMesh)>, SdfError> {
+    Ok(procedural_params(category, n, seed, stream)?
         .into_iter()
         .map(|s| (s, s.mesh(resolution)))
-        .collect()
+        .collect())
 }
 
 /// The parameters of [`procedural`]'s shapes, without meshing them.
-pub fn procedural_params(category: Category, n: usize, seed: u64, stream: u64) -> Vec<FamilyShape> {
+pub fn procedural_params(
+    category: Category,
+    n: usize,
+    seed: u64,
+    stream: u64,
+) -> Result<Vec<FamilyShape>, SdfError> {
     let mut rng = irmirror_geom::rng::seeded(seed, stream);
     (0..n)
         .map(|_| FamilyShape::sample(category, &mut rng))
@@ -198,8 +204,7 @@ pub fn train(
     let mut order: Vec<usize> = (0..n).collect();
     for step in 0..cfg.steps {
         // Cosine decay to 5 % of the start.
-        let decay = 0.05
-            + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / cfg.steps as f64).cos());
+        let decay = CosineDecay { floor: 0.05 }.at_step(step, cfg.steps);
         opt_net.set_learning_rate(cfg.lr_net * decay);
         opt_lat.set_learning_rate(cfg.lr_latent * decay);
         // Shapes without replacement (partial Fisher–Yates), points with replacement.

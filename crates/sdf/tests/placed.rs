@@ -17,7 +17,7 @@ fn prior(cat: Category) -> SdfNet {
 /// A family member placed in a depth frame: its mesh vertices, points 2 % of the size outside
 /// along the normals, the true placement.
 fn observed(cat: Category, seed: u64) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>, Similarity3<f64>) {
-    let shape = FamilyShape::sample(cat, &mut irmirror_geom::rng::seeded(seed, 77));
+    let shape = FamilyShape::sample(cat, &mut irmirror_geom::rng::seeded(seed, 77)).unwrap();
     let prepared = shape.prepare();
     let mesh = shape.mesh(40);
     let truth = Similarity3 {

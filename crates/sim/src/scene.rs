@@ -104,11 +104,11 @@ impl From<Shape> for ObjectShape {
 }
 
 impl ObjectShape {
-    /// The category name used in captures.
-    pub fn category(&self) -> &'static str {
+    /// The category.
+    pub fn category(&self) -> Category {
         match self {
             ObjectShape::Simple(s) => s.category(),
-            ObjectShape::Family(f) => f.category().name(),
+            ObjectShape::Family(f) => f.category(),
         }
     }
 
@@ -149,7 +149,7 @@ impl ObjectShape {
             ),
             Shape::Car { .. } => (Category::Car, 0.95 * scale_m),
         };
-        let family = FamilyShape::sample(category, rng);
+        let family = FamilyShape::sample(category, rng).ok()?;
         let (_, k) = family.normalisation();
         // The family's widest radius (half length) in raw units.
         let raw_half = match family {
@@ -432,7 +432,7 @@ pub fn car(
     phenotype: Phenotype,
     thermal: ThermalPreset,
 ) -> SceneFile {
-    let length = 4.5;
+    let length = irmirror_geom::CAR_LENGTH_M;
     let car = SceneObject {
         shape: Shape::Car {
             cabin: rng.random_range(0.45..0.7),

@@ -339,7 +339,7 @@ impl Simulation {
                 None
             };
             objects.push(ObjectSpec {
-                category: o.shape.category().to_string(),
+                category: o.shape.category(),
                 mask,
             });
         }

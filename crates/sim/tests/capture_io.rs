@@ -43,7 +43,7 @@ fn loader_round_trips_the_simulator() {
         "loading modified the capture directory"
     );
     assert_eq!(cap.objects.len(), 2);
-    assert_eq!(cap.objects[0].category, "bowl");
+    assert_eq!(cap.objects[0].category, irmirror_geom::Category::Bowl);
     assert_eq!(cap.thermal_background_k.len(), 1);
     // Ideal sensor: the loaded temperatures equal the rendered ones up to the 16-bit ADC step.
     for (k, l) in cap.thermal_k.data.iter().zip(&sim.radiance.0.data) {
@@ -283,6 +283,15 @@ fn broken_captures_give_clear_errors() {
                     .unwrap()
             }),
             "empty",
+        ),
+        (
+            "unknown category",
+            Box::new(|d| {
+                edit_toml(d, |t| {
+                    t.replacen("category = \"bowl\"", "category = \"teapot\"", 1)
+                })
+            }),
+            "unknown variant `teapot`, expected one of `bowl`, `mug`, `car`, `sphere`",
         ),
         (
             "mask outside the capture",

@@ -149,7 +149,10 @@ fn family_shapes_round_trip_and_bad_shapes_are_named() {
         .shape
         .family_like(s.objects[1].scale_m, &mut rng)
         .unwrap();
-    assert!(matches!(family, ObjectShape::Family(_)) && family.category() == "mug");
+    assert!(
+        matches!(family, ObjectShape::Family(_))
+            && family.category() == irmirror_geom::Category::Mug
+    );
     s.objects[1].shape = family;
     s.objects[1].scale_m = scale;
     let text = toml::to_string(&s).unwrap();
