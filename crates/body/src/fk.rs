@@ -53,18 +53,44 @@ pub fn skinning_offsets_vjp<T: Real>(
     }
 }
 
-/// VJP of [`forward`]. On entry `d_g`, `d_t` hold `∂L/∂G`, `∂L/∂t` (consumed); writes
-/// `∂L/∂D` into `d_rot`, accumulates `∂L/∂h` into `d_heads`, and returns `∂L/∂τ`.
+/// A kinematic tree: parent of each joint (children after parents; −1 for the root) and the
+/// joints' rest heads, body frame, metres.
+#[derive(Clone, Copy, Debug)]
+pub struct Skeleton<'a, T: Real> {
+    /// Parent joint index, −1 for the root.
+    pub parents: &'a [i32],
+    /// Rest head of each joint, body frame, metres.
+    pub heads: &'a [Vector3<T>],
+}
+
+/// The gradients [`forward_vjp`] reads and writes.
+#[derive(Debug)]
+pub struct FkGrad<'a, T: Real> {
+    /// On entry `∂L/∂G` (world rotations); consumed.
+    pub g: &'a mut [Matrix3<T>],
+    /// On entry `∂L/∂t` (joint positions); consumed.
+    pub t: &'a mut [Vector3<T>],
+    /// Written: `∂L/∂D` (joint rotations).
+    pub rotations: &'a mut [Matrix3<T>],
+    /// Accumulated: `∂L/∂h` (rest heads).
+    pub heads: &'a mut [Vector3<T>],
+}
+
+/// VJP of [`forward`] given its world rotations `g`: consumes `∂L/∂G`, `∂L/∂t` from `grad`,
+/// writes `∂L/∂D`, accumulates `∂L/∂h`, and returns `∂L/∂τ`.
 pub fn forward_vjp<T: Real>(
-    parents: &[i32],
-    heads: &[Vector3<T>],
+    skeleton: &Skeleton<'_, T>,
     rotations: &[Matrix3<T>],
     g: &[Matrix3<T>],
-    d_g: &mut [Matrix3<T>],
-    d_t: &mut [Vector3<T>],
-    d_rot: &mut [Matrix3<T>],
-    d_heads: &mut [Vector3<T>],
+    grad: FkGrad<'_, T>,
 ) -> Vector3<T> {
+    let Skeleton { parents, heads } = *skeleton;
+    let FkGrad {
+        g: d_g,
+        t: d_t,
+        rotations: d_rot,
+        heads: d_heads,
+    } = grad;
     // Children come after parents, so a reverse sweep sees every child before its parent.
     for c in (1..parents.len()).rev() {
         let p = parents[c] as usize;

@@ -26,16 +26,43 @@ impl<T: Real> LbsScratch<T> {
     }
 }
 
-/// Skins `rest` into `out` with `k` influences per vertex.
+/// The skinned mesh: what [`forward`] and [`forward_vjp`] share.
+#[derive(Clone, Copy, Debug)]
+pub struct Skin<'a, T: Real> {
+    /// Rest vertices, body frame, metres.
+    pub rest: &'a [Vector3<T>],
+    /// Joint of each influence, `influences` per vertex.
+    pub indices: &'a [u8],
+    /// Weight of each influence (0: unused slot).
+    pub weights: &'a [f64],
+    /// Influences per vertex.
+    pub influences: usize,
+}
+
+/// Gradients [`forward_vjp`] writes: `∂L/∂A`, `∂L/∂b` per joint and `∂L/∂rest` per vertex.
+#[derive(Debug)]
+pub struct LbsGrad<'a, T: Real> {
+    /// `∂L/∂A_j`.
+    pub a: &'a mut [Matrix3<T>],
+    /// `∂L/∂b_j`.
+    pub b: &'a mut [Vector3<T>],
+    /// `∂L/∂v_i` of the rest vertices.
+    pub rest: &'a mut [Vector3<T>],
+}
+
+/// Skins `skin.rest` into `out` with the joint transforms `(a, b)`.
 pub fn forward<T: Real>(
-    rest: &[Vector3<T>],
-    indices: &[u8],
-    weights: &[f64],
-    k: usize,
+    skin: &Skin<'_, T>,
     a: &[Matrix3<T>],
     b: &[Vector3<T>],
     out: &mut [Vector3<T>],
 ) {
+    let Skin {
+        rest,
+        indices,
+        weights,
+        influences: k,
+    } = *skin;
     out.par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(ci, chunk)| {
@@ -57,20 +84,25 @@ pub fn forward<T: Real>(
         });
 }
 
-/// VJP of [`forward`]: from `d_out` writes `∂L/∂A` (`d_a`), `∂L/∂b` (`d_b`) and
-/// `∂L/∂rest` (`d_rest`).
+/// VJP of [`forward`]: from `d_out` writes `∂L/∂A`, `∂L/∂b` and `∂L/∂rest` into `grad`.
 pub fn forward_vjp<T: Real>(
-    rest: &[Vector3<T>],
-    indices: &[u8],
-    weights: &[f64],
-    k: usize,
+    skin: &Skin<'_, T>,
     a: &[Matrix3<T>],
     d_out: &[Vector3<T>],
-    d_a: &mut [Matrix3<T>],
-    d_b: &mut [Vector3<T>],
-    d_rest: &mut [Vector3<T>],
+    grad: LbsGrad<'_, T>,
     scratch: &mut LbsScratch<T>,
 ) {
+    let Skin {
+        rest,
+        indices,
+        weights,
+        influences: k,
+    } = *skin;
+    let LbsGrad {
+        a: d_a,
+        b: d_b,
+        rest: d_rest,
+    } = grad;
     d_rest
         .par_chunks_mut(CHUNK)
         .zip(scratch.chunks.par_iter_mut())

@@ -231,6 +231,16 @@ impl BodyModel {
         Ok(out)
     }
 
+    /// The skinning inputs of a shaped body.
+    fn skin<'a, T: Real>(&'a self, shaped: &'a ShapedBody<T>) -> lbs::Skin<'a, T> {
+        lbs::Skin {
+            rest: &shaped.vertices,
+            indices: &self.asset.skin_indices,
+            weights: &self.skin_weights,
+            influences: self.asset.influences,
+        }
+    }
+
     /// The rest body of a phenotype.
     pub fn shaped_phenotype<T: Real>(
         &self,
@@ -312,10 +322,7 @@ impl BodyModel {
             &mut out.skin_offsets,
         );
         lbs::forward(
-            &shaped.vertices,
-            &a.skin_indices,
-            &self.skin_weights,
-            a.influences,
+            &self.skin(shaped),
             &out.world_rotations,
             &out.skin_offsets,
             &mut out.vertices,
@@ -373,15 +380,14 @@ impl BodyModel {
             );
         }
         lbs::forward_vjp(
-            &shaped.vertices,
-            &a.skin_indices,
-            &self.skin_weights,
-            a.influences,
+            &self.skin(shaped),
             &posed.world_rotations,
             &posed.d_vertices,
-            &mut posed.d_a,
-            &mut posed.d_b,
-            &mut posed.d_rest,
+            lbs::LbsGrad {
+                a: &mut posed.d_a,
+                b: &mut posed.d_b,
+                rest: &mut posed.d_rest,
+            },
             &mut posed.lbs,
         );
         match grads.joints {
@@ -399,14 +405,18 @@ impl BodyModel {
             &mut posed.d_heads,
         );
         out.translation = fk::forward_vjp(
-            &a.parents,
-            &shaped.joint_heads,
+            &fk::Skeleton {
+                parents: &a.parents,
+                heads: &shaped.joint_heads,
+            },
             &pose.rotations,
             &posed.world_rotations,
-            &mut posed.d_a,
-            &mut posed.d_t,
-            &mut out.rotations,
-            &mut posed.d_heads,
+            fk::FkGrad {
+                g: &mut posed.d_a,
+                t: &mut posed.d_t,
+                rotations: &mut out.rotations,
+                heads: &mut posed.d_heads,
+            },
         );
         shape::shape_vjp(a, &posed.d_rest, &posed.d_heads, &mut out.shape);
     }

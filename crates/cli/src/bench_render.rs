@@ -45,8 +45,7 @@ fn pass(
     target: &[f32],
     params: &OccupancyParams,
     culling: Culling,
-    grad: &mut OccupancyGrad<f32>,
-    d: &mut Vec<f32>,
+    (grad, d): (&mut OccupancyGrad<f32>, &mut Vec<f32>),
 ) -> PassResult {
     let t0 = Instant::now();
     renderer.set_vertices(vertices);
@@ -150,8 +149,7 @@ pub fn run(
             &target,
             &params,
             Culling::Bvh,
-            &mut grad,
-            &mut d,
+            (&mut grad, &mut d),
         ); // warm-up
         reset_peak_rss();
         let rss0 = peak_rss();
@@ -166,8 +164,7 @@ pub fn run(
                 &target,
                 &params,
                 Culling::Bvh,
-                &mut grad,
-                &mut d,
+                (&mut grad, &mut d),
             );
             times.push(t.elapsed().as_secs_f64() * 1e3);
             last = Some(r);
@@ -202,8 +199,7 @@ pub fn run(
         &target,
         &scene.occupancy,
         Culling::Dense,
-        &mut grad,
-        &mut d,
+        (&mut grad, &mut d),
     );
     let dense_ms = t.elapsed().as_secs_f64() * 1e3;
     println!(

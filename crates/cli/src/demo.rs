@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
-use irmirror_recon::pipeline::{Progress, ReconConfig, reconstruct};
+use irmirror_recon::pipeline::{BodyPriors, Progress, ReconConfig, reconstruct};
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
@@ -43,8 +43,17 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     let capture = Capture::load(&capture_dir).context("the simulated capture does not load")?;
 
     let cfg = ReconConfig::default();
-    let rec = reconstruct(&capture, &model, &prior, &cfg, seed, &bars)
-        .context("reconstructing the simulated capture")?;
+    let rec = reconstruct(
+        &capture,
+        BodyPriors {
+            model: &model,
+            prior: &prior,
+        },
+        &cfg,
+        seed,
+        &bars,
+    )
+    .context("reconstructing the simulated capture")?;
     bars.stage("writing results", 0);
     let written = crate::result::write(&stage, "", &capture, &rec, &model, &prior)?;
     for ext in ["ply", "obj", "glb"] {

@@ -19,7 +19,7 @@ use irmirror_geom::nalgebra::Vector3;
 use irmirror_recon::human::HumanState;
 use irmirror_recon::metrics::mean_ci95;
 use irmirror_recon::objects::reconstruct_objects;
-use irmirror_recon::pipeline::{Ablation, Progress, ReconConfig, reconstruct_human};
+use irmirror_recon::pipeline::{Ablation, BodyPriors, Progress, ReconConfig, reconstruct_human};
 use irmirror_recon::preprocess::preprocess;
 use irmirror_sim::{SceneFile, Sensor, ThermalPreset};
 use rand_distr::{Distribution, StandardNormal};
@@ -367,8 +367,10 @@ pub fn run(set: Set, out: &Path, selection: &Selection, progress: bool) -> Resul
                 &capture,
                 pre.clone(),
                 objects.clone(),
-                &model,
-                &prior,
+                BodyPriors {
+                    model: &model,
+                    prior: &prior,
+                },
                 &cfg,
                 *seed,
                 &Silent,

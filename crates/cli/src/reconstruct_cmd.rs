@@ -7,7 +7,9 @@ use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::{Capture, Image, write_gray8_png};
 use irmirror_recon::objects::reconstruct_objects;
-use irmirror_recon::pipeline::{Ablation, Progress, ReconConfig, Reconstruction, reconstruct};
+use irmirror_recon::pipeline::{
+    Ablation, BodyPriors, Progress, ReconConfig, Reconstruction, reconstruct,
+};
 use irmirror_recon::preprocess;
 use std::path::Path;
 use std::time::Instant;
@@ -199,7 +201,17 @@ pub fn run(
             let model = BodyModel::builtin()?;
             let prior = PosePrior::builtin(candle_core::DType::F64)?;
             let bars = Bars::new(progress);
-            let rec = reconstruct(&capture, &model, &prior, &cfg, seed, &bars).with_context(ctx)?;
+            let rec = reconstruct(
+                &capture,
+                BodyPriors {
+                    model: &model,
+                    prior: &prior,
+                },
+                &cfg,
+                seed,
+                &bars,
+            )
+            .with_context(ctx)?;
             bars.finish();
             let st = Staging::new(out, "run.toml")?;
             crate::result::write(&st, "", &capture, &rec, &model, &prior)?;

@@ -264,6 +264,32 @@ pub fn mean_adult(model: &BodyModel) -> Result<irmirror_body::ShapedBody<f64>, R
         .map_err(|e| ReconError::Prior(e.to_string()))
 }
 
+/// Where [`HumanProblem::loss_grad`] evaluates: root translation `t` (depth frame, m), root
+/// rotation `exp(ω) base` (Anny → depth; the gradient is taken in ω at the given value), pose
+/// latent.
+#[derive(Clone, Copy, Debug)]
+pub struct Tangent<'a> {
+    /// Root position, depth frame, m.
+    pub translation: &'a Vector3<f64>,
+    /// Rotation vector applied on the left of `base`, rad.
+    pub omega: &'a Vector3<f64>,
+    /// Base root rotation, Anny → depth.
+    pub base: &'a Matrix3<f64>,
+    /// Pose latent.
+    pub latent: &'a [f64],
+}
+
+/// The rays a loss evaluation sees: reflected rays, their 0/1 targets, and the blur.
+#[derive(Clone, Copy, Debug)]
+pub struct Batch<'a> {
+    /// Reflected rays, depth frame.
+    pub rays: &'a ReflectedRays<f64>,
+    /// Target per ray (1: in the reflection mask).
+    pub target: &'a [f64],
+    /// Occupancy blur σ, m².
+    pub sigma_m2: f64,
+}
+
 /// The state of one hypothesis.
 #[derive(Clone, Debug)]
 pub struct HumanState {
@@ -306,22 +332,27 @@ impl HumanProblem<'_> {
         })
     }
 
-    /// The stage-2 loss on `rays` (targets `target`, 0/1 per ray) at blur `sigma_m2`, with the
-    /// body at root translation `t`, root rotation `exp(ω) base` and pose latent `latent`, and
-    /// the soft IoU. With `grad` (length 6 + latent), writes `∂L/∂(t, ω, latent)` there.
+    /// The stage-2 loss of the body at `at` on `batch`, and the soft IoU. With `grad` (length
+    /// 6 + latent), writes `∂L/∂(t, ω, latent)` there.
     pub fn loss_grad(
         &self,
         ws: &mut Scratch,
-        t: &Vector3<f64>,
-        omega: &Vector3<f64>,
-        base: &Matrix3<f64>,
-        latent: &[f64],
-        rays: &ReflectedRays<f64>,
-        target: &[f64],
-        sigma_m2: f64,
+        at: &Tangent<'_>,
+        batch: &Batch<'_>,
         cfg: &HumanConfig,
         grad: Option<&mut [f64]>,
     ) -> Result<(f64, f64), ReconError> {
+        let Tangent {
+            translation: t,
+            omega,
+            base,
+            latent,
+        } = *at;
+        let Batch {
+            rays,
+            target,
+            sigma_m2,
+        } = *batch;
         let err = |e: String| ReconError::Prior(e);
         let st = HumanState {
             translation: *t,
@@ -414,18 +445,18 @@ impl HumanProblem<'_> {
     /// Loss of a state on all rays at the final σ, and its soft IoU.
     pub fn full_loss(&self, st: &HumanState, cfg: &HumanConfig) -> Result<(f64, f64), ReconError> {
         let mut ws = self.scratch()?;
-        self.loss_grad(
-            &mut ws,
-            &st.translation,
-            &Vector3::zeros(),
-            &st.rotation,
-            &st.latent,
-            self.rays,
-            &self.targets(),
-            cfg.sigma_m2[1],
-            cfg,
-            None,
-        )
+        let at = Tangent {
+            translation: &st.translation,
+            omega: &Vector3::zeros(),
+            base: &st.rotation,
+            latent: &st.latent,
+        };
+        let batch = Batch {
+            rays: self.rays,
+            target: &self.targets(),
+            sigma_m2: cfg.sigma_m2[1],
+        };
+        self.loss_grad(&mut ws, &at, &batch, cfg, None)
     }
 
     /// Initial states (deterministic for `seed`).
@@ -572,18 +603,18 @@ impl HumanProblem<'_> {
             target.clear();
             target.extend(idx.iter().map(|&i| target_all[i]));
 
-            let (loss, _) = self.loss_grad(
-                &mut ws,
-                &st.translation,
-                &omega,
-                &base,
-                &st.latent,
-                &sub,
-                &target,
-                sigma,
-                cfg,
-                Some(&mut g),
-            )?;
+            let at = Tangent {
+                translation: &st.translation,
+                omega: &omega,
+                base: &base,
+                latent: &st.latent,
+            };
+            let batch = Batch {
+                rays: &sub,
+                target: &target,
+                sigma_m2: sigma,
+            };
+            let (loss, _) = self.loss_grad(&mut ws, &at, &batch, cfg, Some(&mut g))?;
             if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
                 return Ok(None);
             }

@@ -165,11 +165,19 @@ pub fn floor(objects: &Objects, cfg: &HumanConfig) -> Option<Floor> {
     })
 }
 
+/// The body model and the pose prior stage 2 fits with.
+#[derive(Clone, Copy)]
+pub struct BodyPriors<'a> {
+    /// The body model.
+    pub model: &'a BodyModel,
+    /// The pose prior (VAE decoder).
+    pub prior: &'a PosePrior,
+}
+
 /// Runs stages 0–2.
 pub fn reconstruct(
     capture: &Capture,
-    model: &BodyModel,
-    prior: &PosePrior,
+    priors: BodyPriors<'_>,
     cfg: &ReconConfig,
     seed: u64,
     progress: &dyn Progress,
@@ -178,7 +186,7 @@ pub fn reconstruct(
     let pre = preprocess(capture, &cfg.preprocess)?;
     progress.stage("object fit", 0);
     let objects = reconstruct_objects(capture, &cfg.objects, seed)?;
-    reconstruct_human(capture, pre, objects, model, prior, cfg, seed, progress)
+    reconstruct_human(capture, pre, objects, priors, cfg, seed, progress)
 }
 
 /// The unblocked reflected rays of every thermal pixel on the fitted objects (after ablations),
@@ -225,8 +233,7 @@ pub fn reconstruct_human(
     capture: &Capture,
     pre: Preprocessed,
     objects: Objects,
-    model: &BodyModel,
-    prior: &PosePrior,
+    priors: BodyPriors<'_>,
     cfg: &ReconConfig,
     seed: u64,
     progress: &dyn Progress,
@@ -240,8 +247,8 @@ pub fn reconstruct_human(
         / placed.len().max(1) as f64;
     let hcfg = cfg.human_settings();
     let problem = HumanProblem {
-        model,
-        prior,
+        model: priors.model,
+        prior: priors.prior,
         rays: &rays,
         mask: &pre.mask,
         up: objects.ground.n(),

@@ -196,6 +196,11 @@ fn stage2_gradient_matches_finite_differences() {
     let cfg = HumanConfig::default();
     let sigma = 4e-4;
     let target = problem.targets();
+    let batch = Batch {
+        rays: &rays,
+        target: &target,
+        sigma_m2: sigma,
+    };
     let t = sim.body.joints[0] + Vector3::new(0.04, -0.02, 0.03);
     let omega = Vector3::new(0.05, -0.03, 0.04);
     let mut latent = prior().encode(&sc.person.rotvec_rad).unwrap();
@@ -205,13 +210,13 @@ fn stage2_gradient_matches_finite_differences() {
     let (l0, _) = problem
         .loss_grad(
             &mut ws,
-            &t,
-            &omega,
-            &r0,
-            &latent,
-            &rays,
-            &target,
-            sigma,
+            &Tangent {
+                translation: &t,
+                omega: &omega,
+                base: &r0,
+                latent: &latent,
+            },
+            &batch,
             &cfg,
             Some(&mut g),
         )
@@ -222,7 +227,18 @@ fn stage2_gradient_matches_finite_differences() {
     );
     let mut f = |t: &Vector3<f64>, w: &Vector3<f64>, z: &[f64]| {
         problem
-            .loss_grad(&mut ws, t, w, &r0, z, &rays, &target, sigma, &cfg, None)
+            .loss_grad(
+                &mut ws,
+                &Tangent {
+                    translation: t,
+                    omega: w,
+                    base: &r0,
+                    latent: z,
+                },
+                &batch,
+                &cfg,
+                None,
+            )
             .unwrap()
             .0
     };

@@ -387,6 +387,18 @@ pub fn fit_placed(
     })
 }
 
+/// A placement relative to the initial similarity: rotation `R₀ exp([δ]×)`, translation
+/// `t₀ + τ · unit_m`, scale `s₀ · exp(log_s)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlacementOffset {
+    /// Rotation vector δ, rad.
+    pub delta: Vector3<f64>,
+    /// Translation τ, in units of `unit_m`.
+    pub tau: Vector3<f64>,
+    /// ln of the scale factor.
+    pub log_s: f64,
+}
+
 /// The loss and its gradient in f64 at `(latent, δ = 0, τ, ln s/s₀)` — what [`fit_placed`]
 /// descends, for gradient checks: `[∂z…, ∂δ (3), ∂τ (3), ∂ln s]`.
 pub fn loss_and_gradient(
@@ -394,11 +406,10 @@ pub fn loss_and_gradient(
     obs: &PlacedObservation,
     init: &Similarity3<f64>,
     latent: &[f64],
-    delta: Vector3<f64>,
-    tau: Vector3<f64>,
-    log_s: f64,
+    offset: &PlacementOffset,
     cfg: &PlacedFitConfig,
 ) -> Result<(f64, Vec<f64>), SdfError> {
+    let PlacementOffset { delta, tau, log_s } = *offset;
     check(net, obs, init, latent)?;
     let dt = DType::F64;
     let layers: Vec<(Tensor, Tensor)> = net

@@ -2,7 +2,9 @@
 
 use irmirror_geom::Similarity3;
 use irmirror_geom::rotation::axis_angle_to_matrix;
-use irmirror_sdf::placed::{PlacedFitConfig, PlacedObservation, fit_placed, loss_and_gradient};
+use irmirror_sdf::placed::{
+    PlacedFitConfig, PlacedObservation, PlacementOffset, fit_placed, loss_and_gradient,
+};
 use irmirror_sdf::{Category, FamilyShape, SdfNet};
 use nalgebra::Vector3;
 
@@ -90,7 +92,8 @@ fn placed_fit_gradients_match_finite_differences() {
         scale_prior: Some((0.1f64.ln(), 0.1)),
     };
     let cfg = PlacedFitConfig::default();
-    let (loss, grad) = loss_and_gradient(&net, &obs, &init, &z, delta, tau, log_s, &cfg).unwrap();
+    let offset = PlacementOffset { delta, tau, log_s };
+    let (loss, grad) = loss_and_gradient(&net, &obs, &init, &z, &offset, &cfg).unwrap();
     assert!(loss > 0.0);
     let no_support = loss_and_gradient(
         &net,
@@ -100,9 +103,7 @@ fn placed_fit_gradients_match_finite_differences() {
         },
         &init,
         &z,
-        delta,
-        tau,
-        log_s,
+        &offset,
         &cfg,
     )
     .unwrap()
@@ -122,7 +123,12 @@ fn placed_fit_gradients_match_finite_differences() {
                 k if k < l + 6 => t[k - l - 3] += sign * h,
                 _ => s += sign * h,
             }
-            loss_and_gradient(&net, &obs, &init, &z, d, t, s, &cfg)
+            let offset = PlacementOffset {
+                delta: d,
+                tau: t,
+                log_s: s,
+            };
+            loss_and_gradient(&net, &obs, &init, &z, &offset, &cfg)
                 .unwrap()
                 .0
         };
