@@ -539,7 +539,14 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
     std::fs::write(meshes.join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
     let bad = dir.join("bad.safetensors");
     for (args, needle) in [
-        (vec!["--category", "chair"], "unknown object category"),
+        (
+            vec!["--category", "chair"],
+            "invalid value 'chair' for '--category",
+        ),
+        (
+            vec!["--category", "sphere"],
+            "priors are trained for bowl, mug and car",
+        ),
         (
             vec!["--category", "mug", "--meshes", meshes.to_str().unwrap()],
             "broken.obj",

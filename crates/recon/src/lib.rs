@@ -1,11 +1,13 @@
-//! Reconstruction (DESIGN.md §1). Built so far: stage 0, thermal preprocessing. Stages 1 (objects)
-//! and 2 (human) follow with the object priors. `recon` never depends on `sim`: ground truth cannot
+//! Reconstruction (DESIGN.md §1): stage 0 (thermal preprocessing), stage 1 (the objects: support
+//! plane, segmentation, per-object fits with the procedural families or the learned priors) and
+//! stage 2 (the person from the reflection). `recon` never depends on `sim`: ground truth cannot
 //! leak into reconstruction (the simulator is a dev-dependency for tests only).
 //!
 //! ```text
-//!  Capture ─► thermal rise over background (frames, or a local median) ─► object pixels in the
-//!  thermal view (depth + masks projected through depth_from_thermal) ─► threshold (Otsu, floored
-//!  at 4 σ of the noise) ─► open/close ─► reflection mask + edge map
+//!  Capture ─preprocess─► reflection mask + edges
+//!  depth ─plane / segment─► object masks ─objects─► FittedObject per object (+ Ground)
+//!  objects + thermal camera ─pipeline::reflected_rays─► ReflectedRays
+//!  ReflectedRays × body (pose prior, soft occupancy) ─human─► hypotheses, best first
 //! ```
 
 pub mod human;
