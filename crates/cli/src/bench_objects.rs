@@ -185,7 +185,7 @@ pub fn run(
                 &objects.objects[k]
             };
             let category = scene.objects[k].shape.category();
-            let fit_mesh = crate::result::object_mesh(fit)?;
+            let fit_mesh = irmirror_eval::views::object_mesh(fit)?;
             let (t, up, full, s) = errors(&fit.depth_from_object, &fit_mesh, truth, true_mesh);
             rows.push(Row {
                 seed,

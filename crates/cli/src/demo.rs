@@ -26,13 +26,13 @@ struct RunRecord<'a> {
     scene: &'a str,
 }
 
-use crate::evaluate::Evaluation;
+use irmirror_eval::score::{Evaluation, evaluate, third_view};
 
 /// Runs the demo into `out`.
 pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     let t0 = Instant::now();
     let model = BodyModel::builtin()?;
-    let prior = PosePrior::builtin(candle_core::DType::F64)?;
+    let prior = PosePrior::builtin_f64()?;
     let stage = Staging::new(out, "run.toml")?;
     let bars = Bars::new(progress);
     bars.stage("simulating a capture", 0);
@@ -64,12 +64,12 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
 
     // Evaluation (the truth is read only here).
     let best = &written.best;
-    let eval = crate::evaluate::evaluate(&sim, best, &written.fitted_mask, &rec.objects)?;
+    let eval = evaluate(&sim, best, &written.fitted_mask, &rec.objects)?;
     write_text(
         &stage.path("eval.json"),
         &serde_json::to_string_pretty(&eval)?,
     )?;
-    let view = crate::evaluate::third_view(&sim, &model, best, &rec.objects)?;
+    let view = third_view(&sim, &model, best, &rec.objects)?;
     save_png(&view, &stage.path("views/third_camera.png"))?;
 
     let scene_text = toml::to_string(&scene)?;

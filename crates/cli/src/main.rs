@@ -6,7 +6,6 @@ mod bench_render;
 mod body_cmd;
 mod demo;
 mod eval_cmd;
-mod evaluate;
 mod output;
 mod prior_cmd;
 mod reconstruct_cmd;
@@ -131,7 +130,7 @@ enum Command {
     Eval {
         /// Benchmark set: quick (12 captures, ≈ 6 min on 2 cores) or full (180).
         #[arg(long, value_enum, default_value = "quick")]
-        preset: eval_cmd::Set,
+        preset: irmirror_eval::bench::Set,
         /// Output report directory.
         #[arg(long)]
         out: PathBuf,
@@ -285,7 +284,7 @@ fn main() -> std::process::ExitCode {
         } => eval_cmd::run(
             preset,
             &out,
-            &eval_cmd::Selection {
+            &irmirror_eval::bench::Selection {
                 limit,
                 category,
                 full_only,

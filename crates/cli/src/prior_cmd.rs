@@ -2,8 +2,8 @@
 
 use crate::output::save_png;
 use anyhow::{Context, Result};
+use irmirror_body::prior::PosePrior;
 use irmirror_body::prior::train::{TrainConfig, train};
-use irmirror_body::prior::{PosePrior, PoseVae};
 use irmirror_body::{BodyModel, Phenotype, Pose};
 use std::path::Path;
 
@@ -32,7 +32,7 @@ pub fn run(out: &Path, cfg: TrainConfig, progress: bool) -> Result<()> {
     let json = serde_json::to_string_pretty(&report)?;
     std::fs::write(out.with_extension("json"), &json)
         .with_context(|| format!("cannot write {}", out.with_extension("json").display()))?;
-    let prior = PosePrior::new(PoseVae::load(out, candle_core::DType::F32)?)?;
+    let prior = PosePrior::load_f32(out)?;
     save_png(
         &sample_grid(&model, &prior, cfg.seed, 4, 6)?,
         &out.with_extension("png"),

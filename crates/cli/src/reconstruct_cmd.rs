@@ -157,7 +157,7 @@ pub fn run(
             let st = Staging::new(out, "run.toml")?;
             std::fs::create_dir_all(st.path("objects"))?;
             for (k, o) in objs.objects.iter().enumerate() {
-                let m = crate::result::object_mesh(o)?;
+                let m = irmirror_eval::views::object_mesh(o)?;
                 m.write(&st.path(&format!("objects/object_{k}.ply")))?;
                 m.write(&st.path(&format!("objects/object_{k}.glb")))?;
                 mask_png(
@@ -199,7 +199,7 @@ pub fn run(
         }
         Stage::Full => {
             let model = BodyModel::builtin()?;
-            let prior = PosePrior::builtin(candle_core::DType::F64)?;
+            let prior = PosePrior::builtin_f64()?;
             let bars = Bars::new(progress);
             let rec = reconstruct(
                 &capture,
@@ -293,5 +293,8 @@ fn write_record(
         "config": cfg,
         "figures": extra,
     });
-    write_text(&st.path("run.toml"), &toml::to_string(&record)?)
+    Ok(write_text(
+        &st.path("run.toml"),
+        &toml::to_string(&record)?,
+    )?)
 }

@@ -11,7 +11,6 @@
 //! ```
 
 pub mod human;
-pub mod metrics;
 pub mod morphology;
 pub mod objects;
 pub mod pipeline;

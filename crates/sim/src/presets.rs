@@ -4,6 +4,7 @@ use crate::people::{random_phenotype, random_pose};
 use crate::scene::{SceneFile, ThermalPreset, car, tabletop};
 use crate::{Sensor, SimError};
 use irmirror_body::BodyModel;
+use irmirror_geom::Category;
 use serde::{Deserialize, Serialize};
 
 /// Scene presets (the paper's setups).
@@ -92,3 +93,63 @@ fn draw_scene(
     }
     scene
 }
+
+/// The benchmark's scene of one category: the car preset, or the tabletop preset keeping only
+/// objects of the category (mugs: a lower rig and the Boson-like camera), redrawn from draw
+/// `first_attempt` on until the reflection shows (≥ [`MIN_REFLECTION_PIXELS`] with an ideal
+/// sensor); the scene and the draw that made it. The NETD is set to `netd_mk`.
+pub fn benchmark_scene(
+    model: &BodyModel,
+    category: Category,
+    seed: u64,
+    netd_mk: f64,
+    first_attempt: u64,
+) -> Result<(SceneFile, u64), SimError> {
+    for attempt in first_attempt..BENCHMARK_ATTEMPTS {
+        let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
+        let phenotype = random_phenotype(&mut rng);
+        let pose = random_pose(model, &mut rng);
+        let mut scene = if category == Category::Car {
+            crate::scene::car(&mut rng, pose, phenotype, ThermalPreset::Lepton)
+        } else {
+            let mut sc = crate::scene::tabletop(&mut rng, pose, phenotype, ThermalPreset::Lepton);
+            sc.objects.retain(|o| o.shape.category() == category);
+            if category == Category::Mug && !sc.objects.is_empty() {
+                // A mug's side reflects near-horizontal rays only: from the preset's camera
+                // (55 cm above the table) they pass over the person's head. Lower the rig to
+                // 20 cm above the table, 40 cm from the mugs, as one films a mug; and a mug is a
+                // small convex mirror: the person covers 1–3 Lepton pixels, so mug scenes use
+                // the Boson-like 640×512 camera.
+                let n = sc.objects.len() as f64;
+                let (cx, cy) = (
+                    sc.objects.iter().map(|o| o.base_m[0]).sum::<f64>() / n,
+                    sc.objects.iter().map(|o| o.base_m[1]).sum::<f64>() / n,
+                );
+                let pose = crate::scene::look_at(
+                    nalgebra::Vector3::new(cx, cy + 0.4, 0.95),
+                    nalgebra::Vector3::new(cx, cy, 0.8),
+                );
+                sc.depth_camera.world_from_camera =
+                    irmirror_geom::transform::RigidFile::from_rigid(&pose);
+                sc.thermal_camera.intrinsics = ThermalPreset::Boson.camera();
+            }
+            sc
+        };
+        if scene.objects.is_empty() {
+            continue;
+        }
+        let mut probe = scene.clone();
+        probe.sensor = Sensor::ideal();
+        if crate::simulate::reflection_pixels(model, &probe)? >= MIN_REFLECTION_PIXELS {
+            scene.sensor.netd_mk = netd_mk;
+            return Ok((scene, attempt));
+        }
+    }
+    Err(SimError::Scene(format!(
+        "no {category} scene with a visible reflection from seed {seed} in {BENCHMARK_ATTEMPTS} draws"
+    )))
+}
+
+/// Scene draws tried per benchmark capture (single-category tabletop scenes reflect the person
+/// less often).
+pub const BENCHMARK_ATTEMPTS: u64 = 200;

@@ -64,6 +64,17 @@ impl PosePrior {
         Self::new(PoseVae::from_tensors(tensors, dtype)?)
     }
 
+    /// The shipped prior in f64 (what stage 2 and evaluation use), without naming candle's
+    /// types outside this crate.
+    pub fn builtin_f64() -> Result<Self, PriorError> {
+        Self::builtin(DType::F64)
+    }
+
+    /// A trained prior from a weights file, in f32 (what training and its samples use).
+    pub fn load_f32(path: &std::path::Path) -> Result<Self, PriorError> {
+        Self::new(PoseVae::load(path, DType::F32)?)
+    }
+
     /// The network.
     pub fn vae(&self) -> &PoseVae {
         &self.vae

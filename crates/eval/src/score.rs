@@ -1,16 +1,16 @@
-//! Figures of one reconstructed body against the simulator's truth (DESIGN.md §5), shared by
-//! `demo` and `eval`.
+//! Figures of one reconstructed body against the simulator's truth (DESIGN.md §5): what `demo`,
+//! `eval` and the benchmark report.
 
-use crate::result::{Drawn, render_view};
-use anyhow::Result;
+use crate::EvalError;
+use crate::metrics::{mpjpe, normalised_distance, pa_mpjpe};
+use crate::views::{Drawn, render_view};
 use irmirror_body::{BodyModel, PosedBody};
 use irmirror_geom::Rigid3;
-use irmirror_geom::nalgebra::Vector3;
-use irmirror_recon::metrics::{mpjpe, normalised_distance, pa_mpjpe};
 use irmirror_recon::objects::Objects;
 use irmirror_render::ReflectedRays;
 use irmirror_render::hard::hard_mask;
 use irmirror_sim::Simulation;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// Figures of one reconstruction.
@@ -47,7 +47,7 @@ pub fn fitted_mask(
 }
 
 /// The simulator's evaluation camera relative to the depth camera.
-pub fn depth_from_third(sim: &Simulation) -> Result<Rigid3<f64>> {
+pub fn depth_from_third(sim: &Simulation) -> Result<Rigid3<f64>, EvalError> {
     Ok(sim
         .scene
         .depth_camera
@@ -63,7 +63,7 @@ pub fn third_view(
     model: &BodyModel,
     body: &PosedBody<f64>,
     objects: &Objects,
-) -> Result<image::RgbImage> {
+) -> Result<image::RgbImage, EvalError> {
     let truth: Vec<Vector3<f64>> = sim
         .body
         .mesh
@@ -96,7 +96,7 @@ pub fn evaluate(
     body: &PosedBody<f64>,
     mask: &[bool],
     objects: &Objects,
-) -> Result<Evaluation> {
+) -> Result<Evaluation, EvalError> {
     let third = &sim.scene.third_camera;
     let third_from_depth = depth_from_third(sim)?.inverse();
     let v3 = |p: &Vector3<f64>| vec![p.x, p.y, p.z];
