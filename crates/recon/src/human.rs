@@ -261,7 +261,7 @@ pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> 
 pub fn mean_adult(model: &BodyModel) -> Result<irmirror_body::ShapedBody<f64>, ReconError> {
     model
         .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
-        .map_err(|e| ReconError::Prior(e.to_string()))
+        .map_err(ReconError::from)
 }
 
 /// Where [`HumanProblem::loss_grad`] evaluates: root translation `t` (depth frame, m), root
@@ -304,10 +304,7 @@ pub struct HumanState {
 impl HumanProblem<'_> {
     /// The pose of a state (36 rotations; root first).
     pub fn pose(&self, st: &HumanState) -> Result<Pose<f64>, ReconError> {
-        let mut rotations = self
-            .prior
-            .decode(&st.latent)
-            .map_err(|e| ReconError::Prior(e.to_string()))?;
+        let mut rotations = self.prior.decode(&st.latent)?;
         rotations[0] = st.rotation;
         Ok(Pose {
             rotations,
@@ -353,16 +350,13 @@ impl HumanProblem<'_> {
             target,
             sigma_m2,
         } = *batch;
-        let err = |e: String| ReconError::Prior(e);
         let st = HumanState {
             translation: *t,
             rotation: axis_angle_to_matrix(omega) * base,
             latent: latent.to_vec(),
         };
         let pose = self.pose(&st)?;
-        self.model
-            .pose_into(&ws.shaped, &pose, &mut ws.posed)
-            .map_err(|e| err(e.to_string()))?;
+        self.model.pose_into(&ws.shaped, &pose, &mut ws.posed)?;
         let r = ws
             .renderer
             .get_or_insert_with(|| SoftRenderer::new(&ws.posed.vertices, &self.model.asset.faces));
@@ -421,10 +415,7 @@ impl HumanProblem<'_> {
         // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
         bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
         let d_omega = axis_angle_to_matrix_vjp(omega, &(bg.rotations[0] * base.transpose()));
-        let d_lat = self
-            .prior
-            .decode_vjp(latent, &bg.rotations)
-            .map_err(|e| err(e.to_string()))?;
+        let d_lat = self.prior.decode_vjp(latent, &bg.rotations)?;
         g[..3].copy_from_slice(bg.translation.as_slice());
         g[3..6].copy_from_slice(d_omega.as_slice());
         for (k, (gk, dk)) in g[6..].iter_mut().zip(&d_lat).enumerate() {
@@ -494,8 +485,7 @@ impl HumanProblem<'_> {
                 };
                 let mut ws = self.scratch()?;
                 self.model
-                    .pose_into(&ws.shaped, &self.pose(&st)?, &mut ws.posed)
-                    .map_err(|e| ReconError::Prior(e.to_string()))?;
+                    .pose_into(&ws.shaped, &self.pose(&st)?, &mut ws.posed)?;
                 -ws.posed
                     .vertices
                     .iter()

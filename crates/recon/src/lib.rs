@@ -63,9 +63,12 @@ pub enum ReconError {
         /// Runs (restarts, initialisations) tried.
         runs: usize,
     },
-    /// The body model or pose prior failed.
-    #[error("body model / pose prior: {0}")]
-    Prior(String),
+    /// The body model refused a parameter.
+    #[error("body model: {0}")]
+    Body(#[from] irmirror_body::BodyError),
+    /// The pose prior failed.
+    #[error("pose prior: {0}")]
+    PosePrior(#[from] irmirror_body::prior::PriorError),
     /// A learned object prior failed (its weights, or its fit diverged).
     #[error("object prior: {0}")]
     ObjectPrior(#[from] irmirror_sdf::SdfError),
