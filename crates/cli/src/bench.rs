@@ -34,9 +34,14 @@ pub enum BenchCommand {
     /// Stage 1 (support plane, segmentation, object fits) against the simulator's truth: one
     /// row per object and the median / 90th percentile / max per category.
     Objects {
-        /// Scene preset.
-        #[arg(long, value_enum, default_value = "tabletop")]
-        preset: crate::simulate_cmd::Preset,
+        /// Capture regime (tabletop-wide: the scenes of the README's stage-1 table).
+        #[arg(
+            long,
+            visible_alias = "preset",
+            value_enum,
+            default_value = "tabletop-wide"
+        )]
+        regime: irmirror_sim::presets::Regime,
         /// Seeds 0..N (N ≥ 1).
         #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
         seeds: u64,
@@ -45,10 +50,25 @@ pub enum BenchCommand {
         segment: bool,
         /// Shape families of the simulated objects.
         #[arg(long, value_enum, default_value = "simple")]
-        shapes: crate::simulate_cmd::ShapeSet,
+        shapes: irmirror_sim::presets::Shapes,
         /// The prior stage 1 fits: the two-parameter family, or then the learned DeepSDF prior.
         #[arg(long, value_enum, default_value = "simple")]
         prior: PriorArg,
+    },
+    /// The person's reflection size per capture regime (ideal sensor): median, 10th and 90th
+    /// percentiles over seeds, and a histogram PNG.
+    ///
+    /// Example: irmirror bench regimes --seeds 50 --png regimes.png
+    Regimes {
+        /// Seeds first..first + N.
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// The first seed.
+        #[arg(long, default_value_t = 0)]
+        first: u64,
+        /// Histogram image to write.
+        #[arg(long, default_value = "regimes.png")]
+        png: PathBuf,
     },
     /// Body model: shape, forward (FK + LBS + keypoints) and backward, in f32.
     Body {
@@ -100,12 +120,15 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             aggregation,
         } => crate::bench_render::run(&scene, reps, no_dense, &epsilon, aggregation.into()),
         BenchCommand::Objects {
-            preset,
+            regime,
             seeds,
             segment,
             shapes,
             prior,
-        } => crate::bench_objects::run(preset, shapes.into(), prior.into(), seeds, segment),
+        } => crate::bench_objects::run(regime, shapes, prior.into(), seeds, segment),
+        BenchCommand::Regimes { seeds, first, png } => {
+            crate::bench_regimes::run(first, seeds, &png)
+        }
         BenchCommand::Body { reps } => {
             let model = BodyModel::builtin()?;
             let z: Vec<f32> = model

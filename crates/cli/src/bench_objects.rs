@@ -11,7 +11,7 @@
 //! figure is summarised over the mugs whose handle the depth camera saw (≥ [`HANDLE_SEEN_PX`]
 //! mask pixels on the handle side of the true cup) and the rest are counted apart.
 
-use crate::simulate_cmd::{Preset, Thermal, preset_scene_with};
+use crate::simulate_cmd::regime_scene;
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
 use irmirror_capture::Capture;
@@ -19,6 +19,7 @@ use irmirror_geom::TriMesh;
 use irmirror_geom::nalgebra::Vector3;
 use irmirror_geom::{Category, Similarity3};
 use irmirror_recon::objects::{ObjectPrior, Stage1Config, reconstruct_objects};
+use irmirror_sim::presets::Regime;
 use irmirror_sim::presets::Shapes;
 use std::time::Instant;
 
@@ -122,11 +123,11 @@ fn errors(
     )
 }
 
-/// Simulates `seeds` captures of `preset` (objects from `shapes`), runs stage 1 with `prior` on
+/// Simulates `seeds` captures of `regime` (objects from `shapes`), runs stage 1 with `prior` on
 /// each (masks as the capture gives them, or segmentation with `segment`), prints one row per
 /// object and a summary per category.
 pub fn run(
-    preset: Preset,
+    regime: Regime,
     shapes: Shapes,
     prior: ObjectPrior,
     seeds: u64,
@@ -146,7 +147,7 @@ pub fn run(
     );
     let mut rows = Vec::new();
     for seed in 0..seeds {
-        let scene = preset_scene_with(&model, preset, Thermal::Lepton, shapes, seed)?;
+        let scene = regime_scene(&model, regime, shapes, seed)?;
         let sim = irmirror_sim::simulate(&model, &scene, seed)?;
         let dir = scratch.join(format!("{seed}"));
         sim.write(&model, &dir, seed)?;
@@ -206,7 +207,7 @@ pub fn run(
     bar.finish_and_clear();
     std::fs::remove_dir_all(&scratch).ok();
     println!(
-        "stage 1 ({prior:?} prior) on the {preset:?} preset ({shapes:?} shapes), seeds 0–{}, {} objects, masks {}, {} threads",
+        "stage 1 ({prior:?} prior) on the {regime} regime ({shapes:?} shapes), seeds 0–{}, {} objects, masks {}, {} threads",
         seeds.saturating_sub(1),
         rows.len(),
         if segment { "segmented" } else { "given" },

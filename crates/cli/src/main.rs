@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_objects;
+mod bench_regimes;
 mod bench_render;
 mod body_cmd;
 mod demo;
@@ -15,6 +16,7 @@ mod simulate_cmd;
 
 use clap::{Parser, Subcommand};
 use irmirror_geom::Category;
+use irmirror_sim::presets::{Cell, Regime, Shapes};
 use std::path::PathBuf;
 
 /// irmirror — 3D human position and pose from thermal reflections in everyday curved objects
@@ -54,18 +56,18 @@ enum Command {
     /// holds the person's parameters, joints and keypoints, the object meshes, a third camera
     /// with its view, and the reflection's size and contrast.
     Simulate {
-        /// Scene preset, used when no --scene is given.
-        #[arg(long, value_enum, default_value = "tabletop")]
-        preset: simulate_cmd::Preset,
-        /// A scene file (TOML, as written to truth/scene.toml) instead of a preset.
+        /// Capture regime, used when no --scene is given: tabletop (paper-like: Boson-class
+        /// 640×512, 50°, 0.35–0.5 m from 1–3 bowls/mugs, person 0.5–2 m away), car (paper-like:
+        /// the same camera 1.5–3 m from a car door, a pedestrian 2.5–8 m away, any facing) or
+        /// tabletop-wide (hard: Lepton-class 160×120, 57°, 0.7 m from the table).
+        #[arg(long, visible_alias = "preset", value_enum, default_value = "tabletop")]
+        regime: Regime,
+        /// A scene file (TOML, as written to truth/scene.toml) instead of a regime.
         #[arg(long)]
         scene: Option<PathBuf>,
-        /// Thermal camera preset (ignored with --scene).
-        #[arg(long, value_enum, default_value = "lepton")]
-        thermal: simulate_cmd::Thermal,
-        /// Shape families of the preset's objects (ignored with --scene).
+        /// Shape families of the regime's objects (ignored with --scene).
         #[arg(long, value_enum, default_value = "simple")]
-        shapes: simulate_cmd::ShapeSet,
+        shapes: Shapes,
         /// Output capture directory.
         #[arg(long)]
         out: PathBuf,
@@ -122,25 +124,30 @@ enum Command {
     },
     /// The Table-1 benchmark: simulate captures, reconstruct with and without each step, score.
     ///
-    /// For each capture of the set (bowl, mug and car scenes, fixed seeds) runs stage 0–1 once
-    /// and stage 2 four times (without edge sampling, without sphere tracing, without surface
-    /// smoothing, full model), plus a Random baseline (pose-prior samples at the true location).
-    /// Writes table.md (metric × object type; means ± 95 % intervals), results.json (per
-    /// capture), report.html (with thumbnails) and run.toml.
+    /// Cells: tabletop-bowl, tabletop-mug and car (the paper-like regimes) and tabletop-wide
+    /// (the hard one), fixed seeds. Per capture: stage 0–1 once, the full model's stage 2, the
+    /// ablations (without edge sampling, sphere tracing, surface smoothing) on the first
+    /// captures of each cell, a Random baseline (pose-prior samples at the true location), and a
+    /// failure diagnosis (the true body's loss through the fitted objects against the fit's).
+    /// Writes table.md (metric × cell; means ± 95 % intervals; diagnosis counts), results.json
+    /// (per capture), report.html (with thumbnails) and run.toml.
+    ///
+    /// Example: irmirror eval --preset quick --out eval-quick --cell car --limit 2
     Eval {
-        /// Benchmark set: quick (12 captures, ≈ 6 min on 2 cores) or full (180).
+        /// Benchmark set: quick (8 captures per cell, ablations on 2 of them) or full (60 per
+        /// cell, ablations on 10).
         #[arg(long, value_enum, default_value = "quick")]
         preset: irmirror_eval::bench::Set,
         /// Output report directory.
         #[arg(long)]
         out: PathBuf,
-        /// Only the first N captures of each object type.
-        #[arg(long)]
-        limit: Option<usize>,
-        /// Only this object type (bowl, mug or car).
+        /// Only the first N (≥ 1) captures of each cell.
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+        limit: Option<u64>,
+        /// Only this cell.
         #[arg(long, value_enum)]
-        category: Option<Category>,
-        /// Only the full model (no ablation columns): four times faster.
+        cell: Option<Cell>,
+        /// Only the full model (no ablation columns).
         #[arg(long)]
         full_only: bool,
     },
@@ -193,17 +200,16 @@ enum Command {
 }
 
 fn simulate(
-    preset: simulate_cmd::Preset,
+    regime: Regime,
     scene: Option<PathBuf>,
-    thermal: simulate_cmd::Thermal,
-    shapes: simulate_cmd::ShapeSet,
+    shapes: Shapes,
     out: &std::path::Path,
     seed: u64,
 ) -> anyhow::Result<()> {
     let model = irmirror_body::BodyModel::builtin()?;
     let scene = match scene {
         Some(p) => simulate_cmd::load_scene(&p)?,
-        None => simulate_cmd::preset_scene_with(&model, preset, thermal, shapes.into(), seed)?,
+        None => simulate_cmd::regime_scene(&model, regime, shapes, seed)?,
     };
     let t0 = std::time::Instant::now();
     let (r, dir) = simulate_cmd::run(&model, &scene, out, seed)?;
@@ -251,13 +257,12 @@ fn main() -> std::process::ExitCode {
         Command::Demo { out, seed } => demo::run(&out, seed, progress),
         Command::Body { command } => body_cmd::run(command, progress),
         Command::Simulate {
-            preset,
+            regime,
             scene,
-            thermal,
             shapes,
             out,
             seed,
-        } => simulate(preset, scene, thermal, shapes, &out, seed),
+        } => simulate(regime, scene, shapes, &out, seed),
         Command::Bench { command } => bench::run(command),
         Command::Reconstruct {
             capture,
@@ -279,14 +284,14 @@ fn main() -> std::process::ExitCode {
             preset,
             out,
             limit,
-            category,
+            cell,
             full_only,
         } => eval_cmd::run(
             preset,
             &out,
             &irmirror_eval::bench::Selection {
-                limit,
-                category,
+                limit: limit.map(|l| l as usize),
+                cell,
                 full_only,
             },
             progress,

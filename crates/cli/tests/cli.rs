@@ -581,7 +581,7 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
 
 #[test]
 fn eval_writes_table_results_and_report() {
-    // One capture per object type (the whole quick set is the ignored test below).
+    // One capture per cell, full model only (the whole quick set is the ignored test below).
     let out = tmp("eval");
     let o = irmirror(&[
         "eval",
@@ -589,30 +589,38 @@ fn eval_writes_table_results_and_report() {
         "quick",
         "--limit",
         "1",
+        "--full-only",
         "--out",
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
     for row in [
-        "| 2-D keypoints, normalised | bowl | 1 |",
-        "| 3-D keypoints, normalised | mug | 1 |",
+        "| 2-D keypoints, normalised | tabletop-bowl | 1 |",
+        "| 3-D keypoints, normalised | tabletop-mug | 1 |",
         "| root error (m) | car | 1 |",
+        "| mean per-vertex error (m) | tabletop-wide | 1 |",
+        "| cell | n | success | search failure | information / model failure | full model failed |",
     ] {
         assert!(table.contains(row), "{table}");
     }
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     let caps = results["captures"].as_array().unwrap();
-    assert_eq!(caps.len(), 3);
+    assert_eq!(caps.len(), 4);
     for c in caps {
-        assert_eq!(c["variants"].as_object().unwrap().len(), 4);
+        assert_eq!(c["variants"].as_object().unwrap().len(), 1);
         // The random baseline sits at the true root.
         assert!(c["random"][0]["root_error_m"].as_f64().unwrap() < 1e-6);
+        // Every capture is diagnosed: the truth's loss through the fitted objects is a loss.
+        let truth = c["diagnosis"]["truth_loss"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&truth), "{c}");
         let id = c["id"].as_str().unwrap();
         assert!(out.join(format!("captures/{id}/overlay.png")).is_file());
         assert!(out.join(format!("captures/{id}/third.png")).is_file());
     }
+    assert_eq!(caps[0]["thermal_width"], 640);
+    assert_eq!(caps[3]["thermal_width"], 160);
     assert!(
         std::fs::read_to_string(out.join("report.html"))
             .unwrap()
@@ -621,28 +629,52 @@ fn eval_writes_table_results_and_report() {
     assert!(out.join("run.toml").is_file());
     assert!(!out.join("scratch").exists());
 
-    // An object type the benchmark does not have: a clear error, nothing written.
-    let bad = tmp("eval-teapot");
+    // The ablations run on the first captures of a cell.
+    let abl = tmp("eval-ablations");
     let o = irmirror(&[
         "eval",
-        "--category",
-        "teapot",
-        "--full-only",
+        "--cell",
+        "tabletop-wide",
+        "--limit",
+        "1",
         "--out",
-        bad.to_str().unwrap(),
+        abl.to_str().unwrap(),
     ]);
-    assert!(
-        !o.status.success()
-            && stderr(&o).contains("teapot")
-            && stderr(&o).contains("bowl, mug, car"),
-        "{}",
-        stderr(&o)
+    assert!(o.status.success(), "{}", stderr(&o));
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(abl.join("results.json")).unwrap()).unwrap();
+    assert_eq!(
+        results["captures"][0]["variants"]
+            .as_object()
+            .unwrap()
+            .len(),
+        4
     );
-    assert!(!bad.exists());
+
+    // A cell the benchmark does not have, or --limit 0: a clear error, nothing written.
+    let bad = tmp("eval-teapot");
+    for (args, needle) in [
+        (
+            vec!["--cell", "teapot"],
+            "invalid value 'teapot' for '--cell",
+        ),
+        (vec!["--limit", "0"], "--limit"),
+    ] {
+        let mut all = vec!["eval", "--full-only", "--out", bad.to_str().unwrap()];
+        all.extend(args);
+        let o = irmirror(&all);
+        assert!(
+            !o.status.success() && stderr(&o).contains(needle),
+            "{needle}: {}",
+            stderr(&o)
+        );
+        assert!(!bad.exists());
+    }
+    std::fs::remove_dir_all(&abl).ok();
 }
 
 #[test]
-#[ignore = "slow: the whole quick benchmark (12 captures, ≈ 10 min on 2 cores)"]
+#[ignore = "slow: the whole quick benchmark (32 captures, ≈ 20 min on 2 cores)"]
 fn eval_quick_set_runs() {
     let out = tmp("eval-quick");
     let o = irmirror(&["eval", "--preset", "quick", "--out", out.to_str().unwrap()]);

@@ -10,17 +10,18 @@
 use crate::EvalError;
 use crate::metrics::mean_ci95;
 use crate::output::{Staging, save_png, write_text};
-use crate::score::{Evaluation, evaluate, fitted_mask, third_view};
+use crate::score::{Evaluation, evaluate, facing_error_deg, fitted_mask, third_view};
 use crate::views::{object_mesh, overlay, posed_body};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
-use irmirror_geom::Category;
-use irmirror_recon::human::HumanState;
+use irmirror_recon::human::{HumanProblem, HumanState};
 use irmirror_recon::objects::{Objects, reconstruct_objects};
-use irmirror_recon::pipeline::{Ablation, BodyPriors, ReconConfig, reconstruct_human};
+use irmirror_recon::pipeline::{
+    Ablation, BodyPriors, ReconConfig, Reconstruction, reconstruct_human,
+};
 use irmirror_recon::{Preprocessed, ReconError, preprocess};
-use irmirror_sim::presets::benchmark_scene;
+use irmirror_sim::presets::{Cell, benchmark_scene};
 use irmirror_sim::{SceneFile, Simulation};
 use nalgebra::Vector3;
 use rand_distr::{Distribution, StandardNormal};
@@ -34,14 +35,44 @@ use std::time::Instant;
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Set {
-    /// 4 captures per object type (12), ≈ 6 minutes on 2 cores.
+    /// 8 captures per cell (32); the ablation columns on the first 2 of each cell.
     Quick,
-    /// 60 captures per object type (180), NETD varied.
+    /// 60 captures per cell (240), NETD varied; the ablation columns on the first 10 of each.
     Full,
 }
 
-/// Object types, as the rows of Table 1.
-pub const CATEGORIES: [Category; 3] = [Category::Bowl, Category::Mug, Category::Car];
+impl Set {
+    /// Captures per cell.
+    pub fn per_cell(self) -> usize {
+        match self {
+            Set::Quick => 8,
+            Set::Full => 60,
+        }
+    }
+
+    /// The first this many captures of each cell also run the ablations.
+    pub fn ablated_per_cell(self) -> usize {
+        match self {
+            Set::Quick => 2,
+            Set::Full => 10,
+        }
+    }
+}
+
+/// One capture of a set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planned {
+    /// Identifier (`<cell>_<index>`).
+    pub id: String,
+    /// The cell.
+    pub cell: Cell,
+    /// Index within its cell.
+    pub index: usize,
+    /// Scene seed.
+    pub seed: u64,
+    /// Thermal NETD, mK.
+    pub netd_mk: f64,
+}
 
 /// A stage-2 variant: Table 1's columns (ablations, then the full model).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -105,10 +136,10 @@ pub struct VariantResult {
 /// One capture.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CaptureResult {
-    /// Identifier (`<type>_<index>`).
+    /// Identifier (`<cell>_<index>`).
     pub id: String,
-    /// Object type.
-    pub category: Category,
+    /// The benchmark cell (regime and object type).
+    pub cell: Cell,
     /// Scene seed.
     pub seed: u64,
     /// Thermal NETD, mK.
@@ -128,6 +159,80 @@ pub struct CaptureResult {
     pub variants: BTreeMap<Variant, VariantResult>,
     /// Random baseline draws.
     pub random: Vec<Evaluation>,
+    /// The full model's failure diagnosis (`None` when it failed).
+    pub diagnosis: Option<Diagnosis>,
+}
+
+/// What a capture's full-model fit says about why it is off (DESIGN.md §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FailureClass {
+    /// The best hypothesis is within [`SUCCESS_ROOT_M`] and [`SUCCESS_FACING_DEG`] of the truth.
+    Success,
+    /// Off, and the true body scores a lower loss than the fit: the optimiser did not find what
+    /// its loss prefers.
+    Search,
+    /// Off, yet the fit scores at least as low as the truth: the observation (or the model) does
+    /// not tell them apart.
+    Information,
+}
+
+impl FailureClass {
+    /// Every class, in the table's column order.
+    pub const ALL: [FailureClass; 3] = [
+        FailureClass::Success,
+        FailureClass::Search,
+        FailureClass::Information,
+    ];
+
+    /// The column heading.
+    pub fn heading(self) -> &'static str {
+        match self {
+            FailureClass::Success => "success",
+            FailureClass::Search => "search failure",
+            FailureClass::Information => "information / model failure",
+        }
+    }
+}
+
+/// A fit within this root distance of the truth…
+pub const SUCCESS_ROOT_M: f64 = 0.15;
+/// …and this facing angle is a success.
+pub const SUCCESS_FACING_DEG: f64 = 30.0;
+
+/// The full model's fit against the true body, both scored by stage 2's data term
+/// (`1 − soft IoU` on all rays at the final σ) through the *fitted* objects.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// The true body mesh's data term.
+    pub truth_loss: f64,
+    /// Every reported hypothesis' data term, best first.
+    pub hypothesis_losses: Vec<f64>,
+    /// Root error of every reported hypothesis, m.
+    pub hypothesis_root_errors_m: Vec<f64>,
+    /// Root error of the hypothesis nearest the truth, m.
+    pub nearest_root_error_m: f64,
+    /// The class.
+    pub class: FailureClass,
+}
+
+impl Diagnosis {
+    /// Classifies from the best hypothesis' root and facing errors and the losses.
+    pub fn classify(
+        truth_loss: f64,
+        best_loss: f64,
+        root_error_m: f64,
+        facing_error_deg: Option<f64>,
+    ) -> FailureClass {
+        let facing_ok = facing_error_deg.is_none_or(|f| f <= SUCCESS_FACING_DEG);
+        if root_error_m <= SUCCESS_ROOT_M && facing_ok {
+            FailureClass::Success
+        } else if truth_loss < best_loss {
+            FailureClass::Search
+        } else {
+            FailureClass::Information
+        }
+    }
 }
 
 /// The whole report (what `results.json` holds).
@@ -143,12 +248,14 @@ pub struct Report {
 
 /// The metric rows of the table: name and accessor.
 type Metric = (&'static str, fn(&Evaluation) -> Option<f64>);
-const METRICS: [Metric; 6] = [
+const METRICS: [Metric; 8] = [
     ("2-D keypoints, normalised", |e| e.keypoints_2d_normalised),
     ("3-D keypoints, normalised", |e| e.keypoints_3d_normalised),
     ("root error (m)", |e| Some(e.root_error_m)),
     ("MPJPE (m)", |e| e.mpjpe_m),
     ("PA-MPJPE (m)", |e| e.pa_mpjpe_m),
+    ("mean per-vertex error (m)", |e| e.vertex_error_m),
+    ("facing error (°)", |e| e.facing_error_deg),
     ("reflection IoU", |e| Some(e.reflection_iou)),
 ];
 
@@ -158,25 +265,22 @@ impl irmirror_recon::pipeline::Progress for Silent {
     fn tick(&self) {}
 }
 
-/// The benchmark's captures: `(id, category, seed, netd_mk)`.
-pub fn captures(set: Set) -> Vec<(String, Category, u64, f64)> {
-    let n = match set {
-        Set::Quick => 4,
-        Set::Full => 60,
-    };
+/// The benchmark's captures, cell by cell.
+pub fn captures(set: Set) -> Vec<Planned> {
     let mut out = Vec::new();
-    for (c, cat) in CATEGORIES.iter().enumerate() {
-        for i in 0..n {
-            let netd = match set {
+    for (c, cell) in Cell::ALL.iter().enumerate() {
+        for index in 0..set.per_cell() {
+            let netd_mk = match set {
                 Set::Quick => 50.0,
-                Set::Full => [30.0, 50.0, 80.0][i % 3],
+                Set::Full => [30.0, 50.0, 80.0][index % 3],
             };
-            out.push((
-                format!("{cat}_{i:02}"),
-                *cat,
-                SEED_BASE + 1000 * c as u64 + i as u64,
-                netd,
-            ));
+            out.push(Planned {
+                id: format!("{cell}_{index:02}"),
+                cell: *cell,
+                index,
+                seed: SEED_BASE + 1000 * c as u64 + index as u64,
+                netd_mk,
+            });
         }
     }
     out
@@ -191,8 +295,8 @@ fn chamfer_mm2(a: &irmirror_geom::TriMesh, b: &irmirror_geom::TriMesh) -> f64 {
 pub struct Selection {
     /// Only the first N captures of each object type.
     pub limit: Option<usize>,
-    /// Only this object type.
-    pub category: Option<Category>,
+    /// Only this cell.
+    pub cell: Option<Cell>,
     /// Only the full model.
     pub full_only: bool,
 }
@@ -218,29 +322,18 @@ struct Prepared {
 }
 
 /// The captures of `selection`, in the set's order.
-pub fn selected(
-    set: Set,
-    selection: &Selection,
-) -> Result<Vec<(String, Category, u64, f64)>, EvalError> {
-    if let Some(c) = selection.category
-        && !CATEGORIES.contains(&c)
-    {
-        return Err(EvalError::Sim(irmirror_sim::SimError::Scene(format!(
-            "--category {c}: the benchmark has bowl, mug and car"
-        ))));
+pub fn selected(set: Set, selection: &Selection) -> Result<Vec<Planned>, EvalError> {
+    if selection.limit == Some(0) {
+        return Err(EvalError::Selection(
+            "--limit 0 selects no capture; give at least 1".into(),
+        ));
     }
     let mut list = captures(set);
     if let Some(l) = selection.limit {
-        let per = list.len() / CATEGORIES.len();
-        list = list
-            .into_iter()
-            .enumerate()
-            .filter(|(k, _)| k % per < l)
-            .map(|(_, c)| c)
-            .collect();
+        list.retain(|p| p.index < l);
     }
-    if let Some(c) = selection.category {
-        list.retain(|x| x.1 == c);
+    if let Some(c) = selection.cell {
+        list.retain(|p| p.cell == c);
     }
     Ok(list)
 }
@@ -261,17 +354,23 @@ pub fn run(
         prior: &prior,
     };
     let stage = Staging::new(out, "table.md")?;
-    let variants: Vec<Variant> = Variant::ALL
-        .iter()
-        .copied()
-        .filter(|v| !selection.full_only || *v == Variant::Full)
-        .collect();
-    progress.start((list.len() * variants.len()) as u64);
+    // The ablation columns run on the first captures of each cell (all of them unless
+    // --full-only): the full model on every capture.
+    let variants_of = |plan: &Planned| -> Vec<Variant> {
+        let ablate = !selection.full_only && plan.index < set.ablated_per_cell();
+        Variant::ALL
+            .iter()
+            .copied()
+            .filter(|v| ablate || *v == Variant::Full)
+            .collect()
+    };
+    progress.start(list.iter().map(|p| variants_of(p).len() as u64).sum());
     let scratch = stage.path("scratch");
     let mut results = Vec::new();
-    for (id, category, seed, netd) in &list {
+    for plan in &list {
+        let id = &plan.id;
         progress.capture(id);
-        let p = prepare(&model, id, *category, *seed, *netd, &scratch)?;
+        let p = prepare(&model, plan, &scratch)?;
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs).map_err(|e| EvalError::Output {
             path: thumbs.clone(),
@@ -279,9 +378,9 @@ pub fn run(
         })?;
         results.push(run_capture(
             &p,
-            (id, *category, *seed, *netd),
+            plan,
             priors,
-            &variants,
+            &variants_of(plan),
             &thumbs,
             progress,
         )?);
@@ -300,7 +399,7 @@ pub fn run(
     )?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "category": selection.category.map_or("all", Category::name), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS });
+    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS });
     write_text(
         &stage.path("run.toml"),
         &toml::to_string(&record).map_err(|e| ser(&e))?,
@@ -312,20 +411,13 @@ pub fn run(
 /// Simulates the capture, reads it back through the loader and runs stage 0, drawing again until
 /// stage 0 sees the reflection through the sensor noise: the benchmark measures reconstruction
 /// from a visible reflection.
-fn prepare(
-    model: &BodyModel,
-    id: &str,
-    category: Category,
-    seed: u64,
-    netd_mk: f64,
-    scratch: &Path,
-) -> Result<Prepared, EvalError> {
+fn prepare(model: &BodyModel, plan: &Planned, scratch: &Path) -> Result<Prepared, EvalError> {
     let cfg = ReconConfig::default();
-    let mut first = 0;
+    let (seed, mut first) = (plan.seed, 0);
     loop {
-        let (scene, attempt) = benchmark_scene(model, category, seed, netd_mk, first)?;
+        let (scene, attempt) = benchmark_scene(model, plan.cell, seed, plan.netd_mk, first)?;
         let sim = irmirror_sim::simulate(model, &scene, seed)?;
-        let dir = scratch.join(id);
+        let dir = scratch.join(&plan.id);
         sim.write(model, &dir, seed)?;
         let capture = Capture::load(&dir)?;
         std::fs::remove_dir_all(&dir).ok();
@@ -349,7 +441,7 @@ fn prepare(
 /// Stage 1 once, stage 2 per variant, and the Random baseline, for one prepared capture.
 fn run_capture(
     p: &Prepared,
-    (id, category, seed, netd_mk): (&str, Category, u64, f64),
+    plan: &Planned,
     priors: BodyPriors<'_>,
     variants: &[Variant],
     thumbs: &Path,
@@ -357,11 +449,12 @@ fn run_capture(
 ) -> Result<CaptureResult, EvalError> {
     let BodyPriors { model, prior } = priors;
     let cfg = ReconConfig::default();
+    let (id, seed) = (plan.id.as_str(), plan.seed);
     let mut result = CaptureResult {
         id: id.to_string(),
-        category,
+        cell: plan.cell,
         seed,
-        netd_mk,
+        netd_mk: plan.netd_mk,
         thermal_width: p.capture.thermal_camera.width,
         reflection_pixels: p.sim.report.reflection_pixels,
         person_distance_m: p.sim.body.joints[0].norm(),
@@ -369,6 +462,7 @@ fn run_capture(
         object_chamfer_mm2: vec![],
         variants: BTreeMap::new(),
         random: vec![],
+        diagnosis: None,
     };
     let objects = reconstruct_objects(&p.capture, &cfg.objects, seed);
     result.objects_time_s = p.t0.elapsed().as_secs_f64();
@@ -425,6 +519,7 @@ fn run_capture(
         let mask = fitted_mask(model, &rec.rays, &body);
         let eval = Some(evaluate(&p.sim, &body, &mask, &rec.objects)?);
         if variant == Variant::Full {
+            result.diagnosis = Some(diagnose(p, priors, &rec)?);
             save_png(
                 &overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
                 &thumbs.join("overlay.png"),
@@ -445,6 +540,65 @@ fn run_capture(
     }
     result.random = random_baseline(p, priors, &objects, seed)?;
     Ok(result)
+}
+
+/// The full model's failure diagnosis: the true body and every reported hypothesis scored by
+/// stage 2's data term through the fitted objects.
+fn diagnose(
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+) -> Result<Diagnosis, EvalError> {
+    let BodyPriors { model, prior } = priors;
+    let hcfg = ReconConfig::default().human_settings();
+    let problem = HumanProblem {
+        model,
+        prior,
+        rays: &rec.rays,
+        mask: &rec.pre.mask,
+        up: rec.objects.ground.n(),
+        objects_centre: Vector3::zeros(),
+        floor: None,
+    };
+    let truth: Vec<Vector3<f64>> = p
+        .sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect();
+    let (truth_loss, _) = problem.mesh_data_loss(&truth, &model.asset.faces, &hcfg);
+    let hypothesis_losses: Vec<f64> = rec
+        .human
+        .hypotheses
+        .iter()
+        .map(|h| 1.0 - h.soft_iou)
+        .collect();
+    let true_root = p.sim.body.joints[0];
+    let hypothesis_root_errors_m: Vec<f64> = rec
+        .states
+        .iter()
+        .map(|st| posed_body(model, prior, st).map(|b| (b.joints[0] - true_root).norm()))
+        .collect::<Result<_, _>>()?;
+    let best = posed_body(model, prior, &rec.states[0])?;
+    let facing = facing_error_deg(&best.keypoints, &p.sim.body.keypoints);
+    let class = Diagnosis::classify(
+        truth_loss,
+        hypothesis_losses[0],
+        hypothesis_root_errors_m[0],
+        facing,
+    );
+    Ok(Diagnosis {
+        truth_loss,
+        nearest_root_error_m: hypothesis_root_errors_m
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min),
+        hypothesis_losses,
+        hypothesis_root_errors_m,
+        class,
+    })
 }
 
 /// The Random baseline: [`RANDOM_DRAWS`] pose-prior samples at the true root position and
@@ -480,16 +634,29 @@ fn random_baseline(
         .collect()
 }
 
-fn cell(values: &[f64]) -> String {
-    match mean_ci95(values) {
+/// Mean ± 95 % interval; with the count when it differs from the row's `n` (ablation columns
+/// run on a subset).
+fn cell(values: &[f64], n: usize) -> String {
+    let m = match mean_ci95(values) {
         Some((m, h)) => format!("{m:.3} ± {h:.3}"),
         None => "n/a".into(),
+    };
+    if values.len() == n || values.is_empty() {
+        m
+    } else {
+        format!("{m} (n = {})", values.len())
     }
 }
 
-/// Table 1's layout: rows metric × object type, columns the ablations, the full model and Random.
+/// The captures of one cell.
+fn of_cell(r: &Report, c: Cell) -> Vec<&CaptureResult> {
+    r.captures.iter().filter(|x| x.cell == c).collect()
+}
+
+/// Table 1's layout per cell (rows metric × cell; columns the ablations, the full model and
+/// Random), then failures, the failure diagnosis counts, and the objects.
 pub fn markdown_table(r: &Report) -> String {
-    let mut s = String::from("| metric | object | n |");
+    let mut s = String::from("| metric | cell | n |");
     for v in Variant::ALL {
         s.push_str(&format!(" {} |", v.heading()));
     }
@@ -497,97 +664,126 @@ pub fn markdown_table(r: &Report) -> String {
     s.push_str(&"---|".repeat(Variant::ALL.len() + 1));
     s.push('\n');
     for (metric, get) in METRICS {
-        for cat in CATEGORIES {
-            let caps: Vec<&CaptureResult> =
-                r.captures.iter().filter(|c| c.category == cat).collect();
+        for c in Cell::ALL {
+            let caps = of_cell(r, c);
             if caps.is_empty() {
                 continue;
             }
-            s.push_str(&format!("| {metric} | {cat} | {} |", caps.len()));
+            let n = caps.len();
+            s.push_str(&format!("| {metric} | {c} | {n} |"));
             for variant in Variant::ALL {
                 let v: Vec<f64> = caps
                     .iter()
-                    .filter_map(|c| {
-                        c.variants
+                    .filter_map(|x| {
+                        x.variants
                             .get(&variant)
-                            .and_then(|x| x.eval.as_ref())
+                            .and_then(|y| y.eval.as_ref())
                             .and_then(get)
                     })
                     .collect();
-                s.push_str(&format!(" {} |", cell(&v)));
+                s.push_str(&format!(" {} |", cell(&v, n)));
             }
             // Random: the per-capture mean over draws, then the mean over captures.
             let v: Vec<f64> = caps
                 .iter()
-                .filter_map(|c| {
-                    let d: Vec<f64> = c.random.iter().filter_map(get).collect();
+                .filter_map(|x| {
+                    let d: Vec<f64> = x.random.iter().filter_map(get).collect();
                     (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
                 })
                 .collect();
-            s.push_str(&format!(" {} |\n", cell(&v)));
+            s.push_str(&format!(" {} |\n", cell(&v, n)));
         }
     }
-    for cat in CATEGORIES {
-        let caps: Vec<&CaptureResult> = r.captures.iter().filter(|c| c.category == cat).collect();
+    for c in Cell::ALL {
+        let caps = of_cell(r, c);
         if caps.is_empty() {
             continue;
         }
         s.push_str(&format!(
-            "| failed reconstructions | {cat} | {} |",
+            "| failed reconstructions | {c} | {} |",
             caps.len()
         ));
         for variant in Variant::ALL {
+            let ran: Vec<&&CaptureResult> = caps
+                .iter()
+                .filter(|x| x.variants.contains_key(&variant))
+                .collect();
             // A variant left out (`--full-only`) did not fail: it did not run.
-            if caps.iter().all(|c| !c.variants.contains_key(&variant)) {
+            if ran.is_empty() {
                 s.push_str(" – |");
             } else {
-                s.push_str(&format!(
-                    " {} |",
-                    caps.iter()
-                        .filter(|c| c.variants.get(&variant).is_some_and(|v| v.eval.is_none()))
-                        .count()
-                ));
+                let failed = ran
+                    .iter()
+                    .filter(|x| x.variants[&variant].eval.is_none())
+                    .count();
+                s.push_str(&format!(" {failed} of {} |", ran.len()));
             }
         }
         s.push_str(" – |\n");
     }
-    s.push_str("\n| object | objects: translation error (mm) | scale error (%) | Chamfer (mm²) | stage 0–1 time (s) | stage 2 time, full model (s) |\n|---|---|---|---|---|---|\n");
-    for cat in CATEGORIES {
-        let caps: Vec<&CaptureResult> = r.captures.iter().filter(|c| c.category == cat).collect();
+    s.push_str(&diagnosis_table(r));
+    s.push_str(&objects_table(r));
+    s
+}
+
+/// Counts of the full model's failure classes per cell.
+pub fn diagnosis_table(r: &Report) -> String {
+    let mut s = String::from("\n| cell | n |");
+    for k in FailureClass::ALL {
+        s.push_str(&format!(" {} |", k.heading()));
+    }
+    s.push_str(" full model failed |\n|---|---|---|---|---|---|\n");
+    for c in Cell::ALL {
+        let caps = of_cell(r, c);
         if caps.is_empty() {
             continue;
         }
-        let full = |c: &&CaptureResult| c.variants.get(&Variant::Full).cloned();
-        let full_eval = |c: &&CaptureResult| full(c).and_then(|v| v.eval);
-        let t: Vec<f64> = caps
+        s.push_str(&format!("| {c} | {} |", caps.len()));
+        for k in FailureClass::ALL {
+            let n = caps
+                .iter()
+                .filter(|x| x.diagnosis.as_ref().is_some_and(|d| d.class == k))
+                .count();
+            s.push_str(&format!(" {n} |"));
+        }
+        let failed = caps.iter().filter(|x| x.diagnosis.is_none()).count();
+        s.push_str(&format!(" {failed} |\n"));
+    }
+    s
+}
+
+/// Stage-1 figures and times per cell.
+fn objects_table(r: &Report) -> String {
+    let mut s = String::from(
+        "\n| cell | objects: translation error (mm) | scale error (%) | Chamfer (mm²) | stage 0–1 time (s) | stage 2 time, full model (s) |\n|---|---|---|---|---|---|\n",
+    );
+    for c in Cell::ALL {
+        let caps = of_cell(r, c);
+        if caps.is_empty() {
+            continue;
+        }
+        let full = |x: &&CaptureResult| x.variants.get(&Variant::Full).cloned();
+        let evals: Vec<Evaluation> = caps
             .iter()
-            .filter_map(full_eval)
-            .flat_map(|e| {
-                e.object_translation_error_m
-                    .iter()
-                    .map(|x| x * 1e3)
-                    .collect::<Vec<_>>()
-            })
+            .filter_map(full)
+            .filter_map(|v| v.eval)
             .collect();
-        let sc: Vec<f64> = caps
+        let t: Vec<f64> = evals
             .iter()
-            .filter_map(full_eval)
-            .flat_map(|e| e.object_scale_error_pct)
+            .flat_map(|e| e.object_translation_error_m.iter().map(|x| x * 1e3))
+            .collect();
+        let sc: Vec<f64> = evals
+            .iter()
+            .flat_map(|e| e.object_scale_error_pct.iter().copied())
             .collect();
         let ch: Vec<f64> = caps
             .iter()
-            .flat_map(|c| c.object_chamfer_mm2.clone())
+            .flat_map(|x| x.object_chamfer_mm2.iter().copied())
             .collect();
-        let t1: Vec<f64> = caps.iter().map(|c| c.objects_time_s).collect();
+        let t1: Vec<f64> = caps.iter().map(|x| x.objects_time_s).collect();
         let t2: Vec<f64> = caps.iter().filter_map(full).map(|v| v.time_s).collect();
-        s.push_str(&format!(
-            "| {cat} | {} | {} | {} | {} | {} |\n",
-            cell(&t),
-            cell(&sc),
-            cell(&ch),
-            cell(&t1),
-            cell(&t2)
-        ));
+        let cells = [&t, &sc, &ch, &t1, &t2].map(|v| cell(v, v.len()));
+        s.push_str(&format!("| {c} | {} |\n", cells.join(" | ")));
     }
     s
 }
@@ -597,16 +793,25 @@ fn html(r: &Report, table: &str) -> String {
     for c in &r.captures {
         let full = c.variants.get(&Variant::Full).and_then(|v| v.eval.as_ref());
         let f = |x: Option<f64>| x.map_or("n/a".into(), |v| format!("{v:.3}"));
+        let diag = c.diagnosis.as_ref().map_or("failed".to_string(), |d| {
+            format!(
+                "{} (truth {:.3}, fit {:.3})",
+                d.class.heading(),
+                d.truth_loss,
+                d.hypothesis_losses.first().copied().unwrap_or(f64::NAN)
+            )
+        });
         rows.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td><img src=\"captures/{}/overlay.png\" width=\"160\"></td><td><img src=\"captures/{}/third.png\" width=\"160\"></td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
+            "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td><img src=\"captures/{}/overlay.png\" width=\"160\"></td><td><img src=\"captures/{}/third.png\" width=\"160\"></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
             c.id,
             c.reflection_pixels,
             c.person_distance_m,
             c.id,
             c.id,
             f(full.and_then(|e| e.keypoints_2d_normalised)),
-            f(full.and_then(|e| e.keypoints_3d_normalised)),
             f(full.map(|e| e.root_error_m)),
+            f(full.and_then(|e| e.vertex_error_m)),
+            diag,
         ));
     }
     let table_html: String = table
@@ -626,11 +831,11 @@ fn html(r: &Report, table: &str) -> String {
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>irmirror eval ({:?})</title>\
          <style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}td{{padding:2px 8px;border-bottom:1px solid #ddd}}</style></head><body>\
          <h1>irmirror eval — {} captures</h1>\
-         <p>Synthetic captures (simulator, Lepton 160×120); means with 95 % intervals (Student t). \
+         <p>Synthetic captures (simulator): cells tabletop-bowl, tabletop-mug and car are the paper-like regimes (Boson-class 640×512, 50°), tabletop-wide the hard one (Lepton-class 160×120, 57°); means with 95 % intervals (Student t). \
          Random: {RANDOM_DRAWS} pose-prior samples per capture at the true root position and orientation. \
          Overlay: observed reflection green, fitted magenta, both white. Third view: fitted body orange, truth green.</p>\
          <table>{table_html}</table><h2>Per capture (full model)</h2>\
-         <table><tr><th>capture</th><th>reflection px</th><th>distance (m)</th><th>observed vs fitted</th><th>third camera</th><th>2-D</th><th>3-D</th><th>root error (m)</th></tr>{rows}</table></body></html>",
+         <table><tr><th>capture</th><th>reflection px</th><th>distance (m)</th><th>observed vs fitted</th><th>third camera</th><th>2-D</th><th>root error (m)</th><th>per-vertex error (m)</th><th>diagnosis (data term: truth, fit)</th></tr>{rows}</table></body></html>",
         r.set,
         r.captures.len()
     )
@@ -648,9 +853,21 @@ mod tests {
             keypoints_3d_normalised: None,
             mpjpe_m: Some(x),
             pa_mpjpe_m: Some(x / 2.0),
+            vertex_error_m: Some(x),
+            facing_error_deg: Some(10.0 * x),
             reflection_iou: 0.5,
             object_translation_error_m: vec![0.001],
             object_scale_error_pct: vec![1.0],
+        }
+    }
+
+    fn diagnosis(class: FailureClass) -> Diagnosis {
+        Diagnosis {
+            truth_loss: 0.2,
+            hypothesis_losses: vec![0.3],
+            hypothesis_root_errors_m: vec![0.4],
+            nearest_root_error_m: 0.4,
+            class,
         }
     }
 
@@ -658,17 +875,19 @@ mod tests {
     fn report_round_trips_and_the_table_has_every_cell() {
         let captures = (0..3)
             .map(|k| CaptureResult {
-                id: format!("mug_{k:02}"),
-                category: Category::Mug,
+                id: format!("tabletop-mug_{k:02}"),
+                cell: Cell::TabletopMug,
                 seed: k,
                 netd_mk: 50.0,
-                thermal_width: 160,
-                reflection_pixels: 20,
+                thermal_width: 640,
+                reflection_pixels: 200,
                 person_distance_m: 2.0,
                 objects_time_s: 0.5,
                 object_chamfer_mm2: vec![0.25],
                 variants: Variant::ALL
                     .iter()
+                    // The ablations ran on the first two captures only.
+                    .filter(|&&v| v == Variant::Full || k < 2)
                     .map(|&v| {
                         // One failure: the full model on the last capture.
                         let failed = v == Variant::Full && k == 2;
@@ -683,6 +902,8 @@ mod tests {
                     })
                     .collect(),
                 random: vec![eval(1.0), eval(3.0)],
+                diagnosis: (k < 2)
+                    .then(|| diagnosis([FailureClass::Search, FailureClass::Success][k as usize])),
             })
             .collect();
         let r = Report {
@@ -693,36 +914,67 @@ mod tests {
         let json = serde_json::to_string(&r).unwrap();
         assert_eq!(serde_json::from_str::<Report>(&json).unwrap(), r);
         let t = markdown_table(&r);
-        // Values 0, 1, 2: mean 1, sd 1, t(2) 4.303 → ± 2.484; random: mean of (1 + 3)/2 = 2.
+        // Ablations on captures 0 and 1: mean 0.5, sd 0.707, t(1) 12.706 → ± 6.353, n = 2 shown.
+        // The full model failed on capture 2: its mean is over the two others too; Random: mean
+        // of (1 + 3)/2 = 2 on all three.
         assert!(
-            t.contains("| root error (m) | mug | 3 | 1.000 ± 2.484 |"),
-            "{t}"
-        );
-        // The full model failed once: its mean is over the two others (0, 1), and it is counted.
-        assert!(t.contains("| 0.500 ± 6.353 | 2.000 ± 0.000 |"), "{t}");
-        assert!(
-            t.contains("| failed reconstructions | mug | 3 | 0 | 0 | 0 | 1 | – |"),
-            "{t}"
-        );
-        assert!(t.contains("2.000 ± 0.000 |"), "{t}");
-        assert!(
-            t.contains("| 3-D keypoints, normalised | mug | 3 | n/a |"),
+            t.contains("| root error (m) | tabletop-mug | 3 | 0.500 ± 6.353 (n = 2) |"),
             "{t}"
         );
         assert!(
-            !t.contains("| bowl |"),
-            "rows without captures are left out"
+            t.contains("| 0.500 ± 6.353 (n = 2) | 2.000 ± 0.000 |"),
+            "{t}"
         );
-        assert!(html(&r, &t).contains("captures/mug_02/overlay.png"));
+        assert!(
+            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 1 of 3 | – |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| mean per-vertex error (m) | tabletop-mug | 3 |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| 3-D keypoints, normalised | tabletop-mug | 3 | n/a |"),
+            "{t}"
+        );
+        // Diagnosis counts: one success, one search failure, none by information, one failed.
+        assert!(t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 |"), "{t}");
+        assert!(!t.contains("| car |"), "rows without captures are left out");
+        assert!(html(&r, &t).contains("captures/tabletop-mug_02/overlay.png"));
+    }
+
+    #[test]
+    fn failures_are_classified_by_distance_then_loss() {
+        use FailureClass::*;
+        assert_eq!(Diagnosis::classify(0.1, 0.2, 0.05, Some(10.0)), Success);
+        assert_eq!(Diagnosis::classify(0.1, 0.2, 0.5, Some(10.0)), Search);
+        assert_eq!(Diagnosis::classify(0.3, 0.2, 0.5, Some(10.0)), Information);
+        assert_eq!(
+            Diagnosis::classify(0.3, 0.2, 0.05, Some(150.0)),
+            Information
+        );
+        assert_eq!(Diagnosis::classify(0.1, 0.2, 0.05, Some(150.0)), Search);
     }
 
     #[test]
     fn benchmark_sets_are_fixed() {
-        assert_eq!(captures(Set::Quick).len(), 12);
-        assert_eq!(captures(Set::Full).len(), 180);
+        assert_eq!(captures(Set::Quick).len(), 32);
+        assert_eq!(captures(Set::Full).len(), 240);
+        let mug = &captures(Set::Quick)[8];
         assert_eq!(
-            captures(Set::Quick)[4],
-            ("mug_00".to_string(), Category::Mug, SEED_BASE + 1000, 50.0)
+            (mug.id.as_str(), mug.cell, mug.seed, mug.netd_mk),
+            ("tabletop-mug_00", Cell::TabletopMug, SEED_BASE + 1000, 50.0)
         );
+        let limited = Selection {
+            limit: Some(2),
+            cell: Some(Cell::Car),
+            full_only: false,
+        };
+        assert_eq!(selected(Set::Quick, &limited).unwrap().len(), 2);
+        let none = Selection {
+            limit: Some(0),
+            ..Selection::default()
+        };
+        assert!(selected(Set::Quick, &none).is_err());
     }
 }

@@ -48,6 +48,9 @@ pub enum EvalError {
     /// A camera transform is not rigid.
     #[error(transparent)]
     Geom(#[from] irmirror_geom::GeomError),
+    /// A benchmark selection that selects nothing.
+    #[error("{0}")]
+    Selection(String),
     /// Serialising a report failed.
     #[error("cannot serialise the report: {0}")]
     Serialise(String),

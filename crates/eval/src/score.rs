@@ -28,6 +28,14 @@ pub struct Evaluation {
     pub mpjpe_m: Option<f64>,
     /// MPJPE after Procrustes (similarity) alignment, m.
     pub pa_mpjpe_m: Option<f64>,
+    /// Mean distance between corresponding vertices of the fitted and true body meshes (same
+    /// topology), m; `None` if the meshes differ in size.
+    #[serde(default)]
+    pub vertex_error_m: Option<f64>,
+    /// Angle between the fitted and true facing directions about the true body's up, degrees
+    /// (facing from the shoulder and hip keypoints); `None` for a degenerate skeleton.
+    #[serde(default)]
+    pub facing_error_deg: Option<f64>,
     /// IoU of the fitted and true reflection masks (thermal pixels).
     pub reflection_iou: f64,
     /// Per object: fitted vs true translation, m.
@@ -140,9 +148,81 @@ pub fn evaluate(
             &joints(&sim.body.keypoints),
         ),
         mpjpe_m: mpjpe(&joints(&body.joints), &joints(&sim.body.joints)),
+        vertex_error_m: vertex_error(&body.vertices, &sim.body.mesh.vertices),
+        facing_error_deg: facing_error_deg(&body.keypoints, &sim.body.keypoints),
         pa_mpjpe_m: pa_mpjpe(&joints(&body.joints), &joints(&sim.body.joints)),
         reflection_iou: inter as f64 / union.max(1) as f64,
         object_translation_error_m: t_err,
         object_scale_error_pct: s_err,
     })
+}
+
+/// Mean per-vertex distance between a fitted mesh and the true one (same topology), m.
+pub fn vertex_error(fitted: &[Vector3<f64>], truth: &[[f32; 3]]) -> Option<f64> {
+    (fitted.len() == truth.len() && !fitted.is_empty()).then(|| {
+        fitted
+            .iter()
+            .zip(truth)
+            .map(|(a, b)| (a - Vector3::from(b.map(f64::from))).norm())
+            .sum::<f64>()
+            / fitted.len() as f64
+    })
+}
+
+/// COCO-17 keypoint indices: left and right shoulder, left and right hip.
+const SHOULDERS_HIPS: [usize; 4] = [5, 6, 11, 12];
+
+/// The body's up (hips → shoulders) and facing (across the shoulders and hips × up) from its
+/// COCO keypoints; `None` when degenerate.
+fn up_and_facing(kp: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let [ls, rs, lh, rh] = SHOULDERS_HIPS.map(|i| kp.get(i).copied());
+    let (ls, rs, lh, rh) = (ls?, rs?, lh?, rh?);
+    let up = ((ls + rs) - (lh + rh)).try_normalize(1e-9)?;
+    let across = (ls - rs) + (lh - rh);
+    let facing = across.cross(&up).try_normalize(1e-9)?;
+    Some((up, facing))
+}
+
+/// Angle between the fitted and true facing directions, both projected onto the plane normal to
+/// the true body's up, degrees.
+pub fn facing_error_deg(fitted_kp: &[Vector3<f64>], true_kp: &[Vector3<f64>]) -> Option<f64> {
+    let (up, f_true) = up_and_facing(true_kp)?;
+    let (_, f_fit) = up_and_facing(fitted_kp)?;
+    let flat = |f: Vector3<f64>| (f - up * up.dot(&f)).try_normalize(1e-9);
+    let (a, b) = (flat(f_fit)?, flat(f_true)?);
+    Some(a.dot(&b).clamp(-1.0, 1.0).acos().to_degrees())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A skeleton's four torso keypoints, facing +X with up +Z, turned by `yaw` about Z.
+    fn torso(yaw: f64) -> Vec<Vector3<f64>> {
+        let r = irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::new(0.0, 0.0, yaw));
+        let mut kp = vec![Vector3::zeros(); 17];
+        // Left is +Y for a body facing +X with up +Z (left = up × facing).
+        kp[5] = r * Vector3::new(0.0, 0.2, 1.5);
+        kp[6] = r * Vector3::new(0.0, -0.2, 1.5);
+        kp[11] = r * Vector3::new(0.0, 0.1, 1.0);
+        kp[12] = r * Vector3::new(0.0, -0.1, 1.0);
+        kp
+    }
+
+    #[test]
+    fn facing_error_is_the_yaw_between_bodies() {
+        for yaw_deg in [0.0f64, 30.0, 90.0, 150.0, 180.0] {
+            let e = facing_error_deg(&torso(yaw_deg.to_radians()), &torso(0.0)).unwrap();
+            assert!((e - yaw_deg).abs() < 1e-9, "{yaw_deg}: {e}");
+        }
+        assert!(facing_error_deg(&vec![Vector3::zeros(); 17], &torso(0.0)).is_none());
+    }
+
+    #[test]
+    fn vertex_error_is_the_mean_distance() {
+        let fitted = [Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 3.0, 0.0)];
+        let truth = [[0.0f32, 0.0, 0.0], [0.0, 0.0, 0.0]];
+        assert_eq!(vertex_error(&fitted, &truth), Some(2.0));
+        assert_eq!(vertex_error(&fitted, &truth[..1]), None);
+    }
 }

@@ -433,6 +433,27 @@ impl HumanProblem<'_> {
             .collect()
     }
 
+    /// The data term of any body mesh (depth frame; e.g. the true body, which the prior need not
+    /// represent): `(1 − soft IoU, soft IoU)` on all rays at the final σ, as the hypotheses'
+    /// `soft_iou` is scored. The failure diagnosis compares it with the fit's.
+    pub fn mesh_data_loss(
+        &self,
+        vertices: &[Vector3<f64>],
+        faces: &[[u32; 3]],
+        cfg: &HumanConfig,
+    ) -> (f64, f64) {
+        let mut renderer = SoftRenderer::new(vertices, faces);
+        renderer.set_vertices(vertices);
+        let params = OccupancyParams {
+            sigma_m2: cfg.sigma_m2[1],
+            aggregation: cfg.aggregation,
+            ..OccupancyParams::default()
+        };
+        let occ = renderer.forward(self.rays, &params, Culling::Bvh);
+        let target = self.targets();
+        soft_iou(&occ.value, |i| target[i], 0.0, &mut Vec::new())
+    }
+
     /// Loss of a state on all rays at the final σ, and its soft IoU.
     pub fn full_loss(&self, st: &HumanState, cfg: &HumanConfig) -> Result<(f64, f64), ReconError> {
         let mut ws = self.scratch()?;

@@ -5,6 +5,7 @@ use crate::scene::{SceneFile, ThermalPreset, car, tabletop};
 use crate::{Sensor, SimError};
 use irmirror_body::BodyModel;
 use irmirror_geom::Category;
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 /// Scene presets (the paper's setups).
@@ -17,8 +18,138 @@ pub enum Preset {
     Car,
 }
 
+/// Capture regimes: the rig (thermal camera, lens, distances) a scene is drawn for. Results are
+/// reported per regime, never pooled (DESIGN.md §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum Regime {
+    /// Paper-like (default): a Boson-class 640×512, 50° thermal camera 0.35–0.5 m from 1–3 bowls
+    /// and mugs, 15–35 cm above the table, so the objects fill much of its view; the person
+    /// 0.5–2 m from the objects, behind the cameras.
+    Tabletop,
+    /// Paper-like: the side of a car seen by a Boson-class 640×512, 50° camera from 1.5–3 m; a
+    /// pedestrian 2.5–8 m from the car, any facing.
+    Car,
+    /// Hard: a Lepton-class 160×120, 57° camera 0.7 m from the table (1–3 objects spread over
+    /// 40 cm); reflections of 10–25 pixels.
+    TabletopWide,
+}
+
+impl Regime {
+    /// Every regime.
+    pub const ALL: [Regime; 3] = [Regime::Tabletop, Regime::Car, Regime::TabletopWide];
+
+    /// The name on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Regime::Tabletop => "tabletop",
+            Regime::Car => "car",
+            Regime::TabletopWide => "tabletop-wide",
+        }
+    }
+
+    /// The thermal camera of the regime.
+    pub fn thermal(self) -> ThermalPreset {
+        match self {
+            Regime::Tabletop | Regime::Car => ThermalPreset::Boson,
+            Regime::TabletopWide => ThermalPreset::Lepton,
+        }
+    }
+}
+
+impl std::fmt::Display for Regime {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The scene of a regime for a seed whose reflection is visible (≥ [`MIN_REFLECTION_PIXELS`]
+/// with an ideal sensor, else the last of [`ATTEMPTS`] draws).
+pub fn regime_scene(
+    model: &BodyModel,
+    regime: Regime,
+    shapes: Shapes,
+    seed: u64,
+) -> Result<SceneFile, SimError> {
+    let mut scene = draw_regime(model, regime, shapes, seed, 0);
+    for attempt in 1..ATTEMPTS {
+        if visible(model, &scene)? {
+            break;
+        }
+        scene = draw_regime(model, regime, shapes, seed, attempt);
+    }
+    Ok(scene)
+}
+
+fn visible(model: &BodyModel, scene: &SceneFile) -> Result<bool, SimError> {
+    let mut probe = scene.clone();
+    probe.sensor = Sensor::ideal();
+    Ok(crate::simulate::reflection_pixels(model, &probe)? >= MIN_REFLECTION_PIXELS)
+}
+
+fn draw_regime(
+    model: &BodyModel,
+    regime: Regime,
+    shapes: Shapes,
+    seed: u64,
+    attempt: u64,
+) -> SceneFile {
+    match regime {
+        Regime::TabletopWide => draw_scene(
+            model,
+            Preset::Tabletop,
+            ThermalPreset::Lepton,
+            shapes,
+            seed,
+            attempt,
+        ),
+        Regime::Car => {
+            let mut scene = draw_scene(
+                model,
+                Preset::Car,
+                ThermalPreset::Boson,
+                shapes,
+                seed,
+                attempt,
+            );
+            // The car preset's cameras stand 1.5 m from the door; the regime's 1.5–3 m, always
+            // between the car and the pedestrian (at least 2 m in front of them). Its own stream:
+            // the rest of the scene is the preset's, draw for draw.
+            let mut rng = irmirror_geom::rng::seeded(seed, 3000 + attempt);
+            let door_y = -0.95;
+            let person_from_door = door_y - scene.person.position_m[1];
+            let room = (person_from_door - 1.5 - 2.0).clamp(0.0, 1.5);
+            let back = rng.random_range(0.0..=room);
+            if let Ok(pose) = scene.depth_camera.world_from_camera.to_rigid() {
+                let eye = pose.translation - nalgebra::Vector3::new(0.0, back, 0.0);
+                let target = nalgebra::Vector3::new(eye.x, 0.0, 0.8);
+                scene.depth_camera.world_from_camera =
+                    irmirror_geom::transform::RigidFile::from_rigid(&crate::scene::look_at(
+                        eye, target,
+                    ));
+            }
+            scene
+        }
+        Regime::Tabletop => {
+            let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
+            let phenotype = random_phenotype(&mut rng);
+            let (name, rotvecs) = random_pose(model, &mut rng);
+            let mut scene = crate::scene::tabletop_close(
+                &mut rng,
+                (name, rotvecs),
+                phenotype,
+                ThermalPreset::Boson,
+            );
+            family_shapes(&mut scene, shapes, seed, attempt);
+            scene
+        }
+    }
+}
+
 /// Which shape families a preset's objects come from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Shapes {
     /// The renderer's two-parameter shapes ([`crate::shapes::Shape`]).
@@ -82,6 +213,12 @@ fn draw_scene(
         Preset::Tabletop => tabletop(&mut rng, (name, rotvecs), phenotype, thermal),
         Preset::Car => car(&mut rng, (name, rotvecs), phenotype, thermal),
     };
+    family_shapes(&mut scene, shapes, seed, attempt);
+    scene
+}
+
+/// With [`Shapes::Family`], replaces each simple shape by a family member of about its size.
+fn family_shapes(scene: &mut SceneFile, shapes: Shapes, seed: u64, attempt: u64) {
     if shapes == Shapes::Family {
         // Its own stream: the rest of the scene is the simple preset's, draw for draw.
         let mut rng = irmirror_geom::rng::seeded(seed, 2000 + attempt);
@@ -91,65 +228,94 @@ fn draw_scene(
             }
         }
     }
-    scene
 }
 
-/// The benchmark's scene of one category: the car preset, or the tabletop preset keeping only
-/// objects of the category (mugs: a lower rig and the Boson-like camera), redrawn from draw
-/// `first_attempt` on until the reflection shows (≥ [`MIN_REFLECTION_PIXELS`] with an ideal
-/// sensor); the scene and the draw that made it. The NETD is set to `netd_mk`.
+/// A cell of the benchmark: a regime, and for tabletop regimes the one object type its scenes
+/// keep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum Cell {
+    /// Paper-like tabletop, bowls only.
+    TabletopBowl,
+    /// Paper-like tabletop, mugs only.
+    TabletopMug,
+    /// Paper-like car.
+    Car,
+    /// The hard wide-view tabletop (bowls and mugs).
+    TabletopWide,
+}
+
+impl Cell {
+    /// Every cell, in the table's row order.
+    pub const ALL: [Cell; 4] = [
+        Cell::TabletopBowl,
+        Cell::TabletopMug,
+        Cell::Car,
+        Cell::TabletopWide,
+    ];
+
+    /// The regime.
+    pub fn regime(self) -> Regime {
+        match self {
+            Cell::TabletopBowl | Cell::TabletopMug => Regime::Tabletop,
+            Cell::Car => Regime::Car,
+            Cell::TabletopWide => Regime::TabletopWide,
+        }
+    }
+
+    /// The object type kept (`None`: all of the regime's objects).
+    pub fn category(self) -> Option<Category> {
+        match self {
+            Cell::TabletopBowl => Some(Category::Bowl),
+            Cell::TabletopMug => Some(Category::Mug),
+            Cell::Car | Cell::TabletopWide => None,
+        }
+    }
+
+    /// The name in tables and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Cell::TabletopBowl => "tabletop-bowl",
+            Cell::TabletopMug => "tabletop-mug",
+            Cell::Car => "car",
+            Cell::TabletopWide => "tabletop-wide",
+        }
+    }
+}
+
+impl std::fmt::Display for Cell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The benchmark's scene of one cell: the regime's scene keeping only the cell's object type,
+/// redrawn from draw `first_attempt` on until objects remain and the reflection shows (≥
+/// [`MIN_REFLECTION_PIXELS`] with an ideal sensor); the scene and the draw that made it. The NETD
+/// is set to `netd_mk`.
 pub fn benchmark_scene(
     model: &BodyModel,
-    category: Category,
+    cell: Cell,
     seed: u64,
     netd_mk: f64,
     first_attempt: u64,
 ) -> Result<(SceneFile, u64), SimError> {
     for attempt in first_attempt..BENCHMARK_ATTEMPTS {
-        let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
-        let phenotype = random_phenotype(&mut rng);
-        let pose = random_pose(model, &mut rng);
-        let mut scene = if category == Category::Car {
-            crate::scene::car(&mut rng, pose, phenotype, ThermalPreset::Lepton)
-        } else {
-            let mut sc = crate::scene::tabletop(&mut rng, pose, phenotype, ThermalPreset::Lepton);
-            sc.objects.retain(|o| o.shape.category() == category);
-            if category == Category::Mug && !sc.objects.is_empty() {
-                // A mug's side reflects near-horizontal rays only: from the preset's camera
-                // (55 cm above the table) they pass over the person's head. Lower the rig to
-                // 20 cm above the table, 40 cm from the mugs, as one films a mug; and a mug is a
-                // small convex mirror: the person covers 1–3 Lepton pixels, so mug scenes use
-                // the Boson-like 640×512 camera.
-                let n = sc.objects.len() as f64;
-                let (cx, cy) = (
-                    sc.objects.iter().map(|o| o.base_m[0]).sum::<f64>() / n,
-                    sc.objects.iter().map(|o| o.base_m[1]).sum::<f64>() / n,
-                );
-                let pose = crate::scene::look_at(
-                    nalgebra::Vector3::new(cx, cy + 0.4, 0.95),
-                    nalgebra::Vector3::new(cx, cy, 0.8),
-                );
-                sc.depth_camera.world_from_camera =
-                    irmirror_geom::transform::RigidFile::from_rigid(&pose);
-                sc.thermal_camera.intrinsics = ThermalPreset::Boson.camera();
-            }
-            sc
-        };
-        if scene.objects.is_empty() {
-            continue;
+        let mut scene = draw_regime(model, cell.regime(), Shapes::Simple, seed, attempt);
+        if let Some(c) = cell.category() {
+            scene.objects.retain(|o| o.shape.category() == c);
         }
-        let mut probe = scene.clone();
-        probe.sensor = Sensor::ideal();
-        if crate::simulate::reflection_pixels(model, &probe)? >= MIN_REFLECTION_PIXELS {
+        if !scene.objects.is_empty() && visible(model, &scene)? {
             scene.sensor.netd_mk = netd_mk;
             return Ok((scene, attempt));
         }
     }
     Err(SimError::Scene(format!(
-        "no {category} scene with a visible reflection from seed {seed} in {BENCHMARK_ATTEMPTS} draws"
+        "no {cell} scene with a visible reflection from seed {seed} in {BENCHMARK_ATTEMPTS} draws"
     )))
 }
 
-/// Scene draws tried per benchmark capture (single-category tabletop scenes reflect the person
-/// less often).
+/// Scene draws tried per benchmark capture (single-category scenes reflect the person less
+/// often).
 pub const BENCHMARK_ATTEMPTS: u64 = 200;

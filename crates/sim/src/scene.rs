@@ -394,6 +394,105 @@ pub fn tabletop(
     )
 }
 
+/// The paper-like tabletop: 1–3 bowls and mugs close together on a table, seen from
+/// 0.35–0.5 m by the cameras 15–35 cm above the table, so the objects fill much of a 50° view;
+/// a person 0.5–2 m from the objects, behind the cameras (outside both views), facing the
+/// table give or take 0.4 rad. The thermal camera is `thermal` (the regime uses the Boson-like
+/// 640×512).
+pub fn tabletop_close(
+    rng: &mut impl Rng,
+    pose: (String, Vec<[f64; 3]>),
+    phenotype: Phenotype,
+    thermal: ThermalPreset,
+) -> SceneFile {
+    let table = Table {
+        height_m: 0.75,
+        centre_m: [0.0, 0.0],
+        size_m: [1.4, 0.9],
+        temp_c: 22.0,
+        emissivity: 0.93,
+    };
+    let n_objects = rng.random_range(1..=3);
+    let mut objects: Vec<SceneObject> = Vec::new();
+    let mut tries = 0;
+    while objects.len() < n_objects && tries < 200 {
+        tries += 1;
+        let (shape, scale) = if rng.random_bool(0.5) {
+            (
+                Shape::Bowl {
+                    cut: rng.random_range(-0.2..0.05),
+                    wall: rng.random_range(0.04..0.08),
+                },
+                rng.random_range(0.06..0.09),
+            )
+        } else {
+            (
+                Shape::Mug {
+                    aspect: rng.random_range(0.9..1.3),
+                    wall: rng.random_range(0.08..0.14),
+                },
+                rng.random_range(0.05..0.07),
+            )
+        };
+        // Side by side across the view, a little depth between them.
+        let base = [
+            rng.random_range(-0.13..0.13),
+            rng.random_range(-0.05..0.05),
+            0.75,
+        ];
+        if objects.iter().any(|o| {
+            ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt()
+                < o.scale_m + scale + 0.015
+        }) {
+            continue;
+        }
+        objects.push(SceneObject {
+            shape: shape.into(),
+            base_m: base,
+            yaw_rad: rng.random_range(-3.1..3.1),
+            scale_m: scale,
+            emissivity: 0.91,
+            temp_c: 22.0,
+        });
+    }
+    let n = objects.len().max(1) as f64;
+    let (cx, cy) = (
+        objects.iter().map(|o| o.base_m[0]).sum::<f64>() / n,
+        objects.iter().map(|o| o.base_m[1]).sum::<f64>() / n,
+    );
+    // Cameras on the person's side of the table (+Y), looking at the objects.
+    let back = rng.random_range(0.35..0.5);
+    let height = rng.random_range(0.15..0.35);
+    let eye = Vector3::new(cx, cy + back, 0.75 + height);
+    let world_from_depth = look_at(eye, Vector3::new(cx, cy, 0.8));
+    // The person behind the cameras, 0.5–2 m from the objects.
+    let dist = rng.random_range(0.5..2.0f64).max(back + 0.3);
+    let angle: f64 = rng.random_range(-0.5..0.5);
+    let position = [cx + dist * angle.sin(), cy + dist * angle.cos()];
+    let person = Person {
+        phenotype,
+        rotvec_rad: pose.1,
+        pose_name: pose.0,
+        position_m: position,
+        yaw_rad: rng.random_range(-0.4..0.4),
+        skin_c: 34.0,
+        clothing_c: 30.0,
+    };
+    let third = look_at(
+        Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4),
+        Vector3::new(position[0], position[1], 0.9),
+    );
+    assemble(
+        22.0,
+        &world_from_depth,
+        &third,
+        thermal,
+        Some(table),
+        objects,
+        person,
+    )
+}
+
 /// A scene with the presets' cameras: a 320×240, 70° depth camera, the thermal camera 4 cm to
 /// its right, and a 320×240, 60° evaluation camera.
 fn assemble(
