@@ -57,7 +57,8 @@ enum Command {
     /// with its view, and the reflection's size and contrast.
     Simulate {
         /// Capture regime, used when no --scene is given: tabletop (paper-like: Boson-class
-        /// 640×512, 50°, 0.35–0.5 m from 1–3 bowls/mugs, person 0.5–2 m away), car (paper-like:
+        /// 640×512, 50°, 0.35–0.5 m from 1–3 bowls/mugs, 6–35 cm above the table, person 0.5–2 m
+        /// from the objects), car (paper-like:
         /// the same camera 1.5–3 m from a car door, a pedestrian 2.5–8 m away, any facing) or
         /// tabletop-wide (hard: Lepton-class 160×120, 57°, 0.7 m from the table).
         #[arg(long, visible_alias = "preset", value_enum, default_value = "tabletop")]

@@ -670,6 +670,13 @@ fn eval_writes_table_results_and_report() {
         );
         assert!(!bad.exists());
     }
+    // An --out that cannot be written: a clear error naming it, before any work.
+    let o = irmirror(&["eval", "--full-only", "--out", "/proc/irmirror-eval/out"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("/proc/irmirror-eval"),
+        "{}",
+        stderr(&o)
+    );
     std::fs::remove_dir_all(&abl).ok();
 }
 

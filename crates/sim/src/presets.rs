@@ -25,7 +25,7 @@ pub enum Preset {
 #[serde(rename_all = "kebab-case")]
 pub enum Regime {
     /// Paper-like (default): a Boson-class 640×512, 50° thermal camera 0.35–0.5 m from 1–3 bowls
-    /// and mugs, 15–35 cm above the table, so the objects fill much of its view; the person
+    /// and mugs, 6–35 cm above the table, so the objects fill much of its view; the person
     /// 0.5–2 m from the objects, behind the cameras.
     Tabletop,
     /// Paper-like: the side of a car seen by a Boson-class 640×512, 50° camera from 1.5–3 m; a
@@ -82,10 +82,13 @@ pub fn regime_scene(
     Ok(scene)
 }
 
+/// The regimes' acceptance rule: the reflection covers ≥ [`MIN_REFLECTION_PIXELS`] (ideal
+/// sensor) and neither camera sees the person directly.
 fn visible(model: &BodyModel, scene: &SceneFile) -> Result<bool, SimError> {
     let mut probe = scene.clone();
     probe.sensor = Sensor::ideal();
-    Ok(crate::simulate::reflection_pixels(model, &probe)? >= MIN_REFLECTION_PIXELS)
+    let p = crate::simulate::reflection_probe(model, &probe)?;
+    Ok(p.pixels >= MIN_REFLECTION_PIXELS && !p.directly_visible)
 }
 
 fn draw_regime(

@@ -395,7 +395,8 @@ pub fn tabletop(
 }
 
 /// The paper-like tabletop: 1–3 bowls and mugs close together on a table, seen from
-/// 0.35–0.5 m by the cameras 15–35 cm above the table, so the objects fill much of a 50° view;
+/// 0.35–0.5 m by the cameras 6–35 cm above the table (a mug's side reflects near-horizontal rays),
+/// so the objects fill much of a 50° view;
 /// a person 0.5–2 m from the objects, behind the cameras (outside both views), facing the
 /// table give or take 0.4 rad. The thermal camera is `thermal` (the regime uses the Boson-like
 /// 640×512).
@@ -462,11 +463,13 @@ pub fn tabletop_close(
     );
     // Cameras on the person's side of the table (+Y), looking at the objects.
     let back = rng.random_range(0.35..0.5);
-    let height = rng.random_range(0.15..0.35);
+    let height = rng.random_range(0.06..0.35);
     let eye = Vector3::new(cx, cy + back, 0.75 + height);
     let world_from_depth = look_at(eye, Vector3::new(cx, cy, 0.8));
-    // The person behind the cameras, 0.5–2 m from the objects.
-    let dist = rng.random_range(0.5..2.0f64).max(back + 0.3);
+    // The person behind the cameras, 0.5–2 m from the objects and at least 0.5 m behind the
+    // cameras (closer, their legs enter the cameras' view; scenes where either camera sees the
+    // person are redrawn by the regime).
+    let dist = rng.random_range(0.5..2.0f64).max(back + 0.5);
     let angle: f64 = rng.random_range(-0.5..0.5);
     let position = [cx + dist * angle.sin(), cy + dist * angle.cos()];
     let person = Person {

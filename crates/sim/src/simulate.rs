@@ -115,6 +115,20 @@ fn reflection_truth(
 
 /// How many thermal pixels show the person by reflection (cheap: no thermal rendering).
 pub fn reflection_pixels(model: &BodyModel, scene: &SceneFile) -> Result<usize, SimError> {
+    Ok(reflection_probe(model, scene)?.pixels)
+}
+
+/// What a scene shows of the person, without rendering radiance.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Probe {
+    /// Thermal pixels that see the person by reflection (pixel-centre rays).
+    pub pixels: usize,
+    /// Whether the thermal or the depth camera sees the person directly.
+    pub directly_visible: bool,
+}
+
+/// The scene's reflection size, and whether either camera sees the person directly.
+pub fn reflection_probe(model: &BodyModel, scene: &SceneFile) -> Result<Probe, SimError> {
     let depth_from_world = rigid(
         &scene.depth_camera.world_from_camera,
         "depth_camera.world_from_camera",
@@ -126,13 +140,13 @@ pub fn reflection_pixels(model: &BodyModel, scene: &SceneFile) -> Result<usize, 
         &scene.thermal_camera.depth_from_thermal,
         "thermal_camera.depth_from_thermal",
     )?;
-    Ok(
-        reflection_truth(&with, &scene.thermal_camera.intrinsics, &dft)
-            .0
-            .iter()
-            .filter(|&&m| m)
-            .count(),
-    )
+    let (mask, _, thermal_sees) = reflection_truth(&with, &scene.thermal_camera.intrinsics, &dft);
+    let (_, _, depth_sees) =
+        reflection_truth(&with, &scene.depth_camera.intrinsics, &Rigid3::identity());
+    Ok(Probe {
+        pixels: mask.iter().filter(|&&m| m).count(),
+        directly_visible: thermal_sees || depth_sees,
+    })
 }
 
 /// Renders `scene` (noise drawn from `seed`).
