@@ -306,35 +306,61 @@ fn small_baseline() -> RigidFile {
     })
 }
 
-/// The tabletop preset: 1–3 bowls and mugs on a table seen from above by the cameras, and a
-/// person 1–3 m away, usually outside both cameras' view.
-pub fn tabletop(
-    rng: &mut impl Rng,
-    pose: (String, Vec<[f64; 3]>),
-    phenotype: Phenotype,
-    thermal: ThermalPreset,
-) -> SceneFile {
-    let table = Table {
-        height_m: 0.75,
-        centre_m: [0.0, 0.0],
-        size_m: [1.4, 0.9],
-        temp_c: 22.0,
-        emissivity: 0.93,
-    };
-    // Cameras 0.55 m above the table, 0.45 m back, looking at the table centre.
-    let eye = Vector3::new(0.0, 0.45, 0.75 + 0.55);
-    let world_from_depth = look_at(eye, Vector3::new(0.0, -0.05, 0.75));
-    let n_objects = rng.random_range(1..=3);
+/// The presets' table: 1.4 × 0.9 m, top at 0.75 m, 22 °C, ε 0.93.
+const TABLE: Table = Table {
+    height_m: 0.75,
+    centre_m: [0.0, 0.0],
+    size_m: [1.4, 0.9],
+    temp_c: 22.0,
+    emissivity: 0.93,
+};
+
+/// Where and how large a tabletop preset draws its glazed bowls and mugs (world, metres).
+struct Layout {
+    /// Bowl scale (rim radius) range.
+    bowl_scale_m: std::ops::Range<f64>,
+    /// Mug scale range.
+    mug_scale_m: std::ops::Range<f64>,
+    /// Base position ranges on the table.
+    x_m: std::ops::Range<f64>,
+    /// See `x_m`.
+    y_m: std::ops::Range<f64>,
+    /// Clearance between two objects' bounding circles.
+    gap_m: f64,
+}
+
+/// The wide preset's layout: objects anywhere over 40 cm × 26 cm.
+const SPREAD_LAYOUT: Layout = Layout {
+    bowl_scale_m: 0.08..0.12,
+    mug_scale_m: 0.06..0.08,
+    x_m: -0.2..0.2,
+    y_m: -0.18..0.08,
+    gap_m: 0.02,
+};
+
+/// The close rig's layout: smaller objects side by side, a little depth between them.
+const CLOSE_LAYOUT: Layout = Layout {
+    bowl_scale_m: 0.06..0.09,
+    mug_scale_m: 0.05..0.07,
+    x_m: -0.13..0.13,
+    y_m: -0.05..0.05,
+    gap_m: 0.015,
+};
+
+/// Draws `n` non-overlapping glazed bowls and mugs (half each, on average) on the table, giving
+/// up after `tries` draws.
+fn place_objects(rng: &mut impl Rng, n: usize, layout: &Layout, tries: usize) -> Vec<SceneObject> {
     let mut objects: Vec<SceneObject> = Vec::new();
-    while objects.len() < n_objects {
-        let bowl = rng.random_bool(0.5);
-        let (shape, scale) = if bowl {
+    let mut tried = 0;
+    while objects.len() < n && tried < tries {
+        tried += 1;
+        let (shape, scale) = if rng.random_bool(0.5) {
             (
                 Shape::Bowl {
                     cut: rng.random_range(-0.2..0.05),
                     wall: rng.random_range(0.04..0.08),
                 },
-                rng.random_range(0.08..0.12),
+                rng.random_range(layout.bowl_scale_m.clone()),
             )
         } else {
             (
@@ -342,17 +368,17 @@ pub fn tabletop(
                     aspect: rng.random_range(0.9..1.3),
                     wall: rng.random_range(0.08..0.14),
                 },
-                rng.random_range(0.06..0.08),
+                rng.random_range(layout.mug_scale_m.clone()),
             )
         };
         let base = [
-            rng.random_range(-0.2..0.2),
-            rng.random_range(-0.18..0.08),
-            0.75,
+            rng.random_range(layout.x_m.clone()),
+            rng.random_range(layout.y_m.clone()),
+            TABLE.height_m,
         ];
         if objects.iter().any(|o| {
             ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt()
-                < o.scale_m + scale + 0.02
+                < o.scale_m + scale + layout.gap_m
         }) {
             continue;
         }
@@ -365,11 +391,17 @@ pub fn tabletop(
             temp_c: 22.0,
         });
     }
-    // The person stands behind the cameras (so only reflections show them), 1–3 m from the table.
-    let dist = rng.random_range(0.5..1.5);
-    let angle: f64 = rng.random_range(-0.6..0.6);
-    let position = [dist * angle.sin(), 0.45 + dist * angle.cos()];
-    // Facing the table (towards −Y), give or take.
+    objects
+}
+
+/// A tabletop person at `position` (world floor, m) facing the table (−Y) ± 0.4 rad, and the
+/// evaluation camera that sees them.
+fn person_facing_table(
+    rng: &mut impl Rng,
+    pose: (String, Vec<[f64; 3]>),
+    phenotype: Phenotype,
+    position: [f64; 2],
+) -> (Person, Rigid3<f64>) {
     let person = Person {
         phenotype,
         rotvec_rad: pose.1,
@@ -383,12 +415,33 @@ pub fn tabletop(
         Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4),
         Vector3::new(position[0], position[1], 0.9),
     );
+    (person, third)
+}
+
+/// The tabletop preset: 1–3 bowls and mugs on a table seen from above by the cameras, and a
+/// person 1–3 m away, usually outside both cameras' view.
+pub fn tabletop(
+    rng: &mut impl Rng,
+    pose: (String, Vec<[f64; 3]>),
+    phenotype: Phenotype,
+    thermal: ThermalPreset,
+) -> SceneFile {
+    // Cameras 0.55 m above the table, 0.45 m back, looking at the table centre.
+    let eye = Vector3::new(0.0, 0.45, 0.75 + 0.55);
+    let world_from_depth = look_at(eye, Vector3::new(0.0, -0.05, 0.75));
+    let n_objects = rng.random_range(1..=3);
+    let objects = place_objects(rng, n_objects, &SPREAD_LAYOUT, usize::MAX);
+    // The person stands behind the cameras (so only reflections show them), 1–3 m from the table.
+    let dist = rng.random_range(0.5..1.5);
+    let angle: f64 = rng.random_range(-0.6..0.6);
+    let position = [dist * angle.sin(), 0.45 + dist * angle.cos()];
+    let (person, third) = person_facing_table(rng, pose, phenotype, position);
     assemble(
         22.0,
         &world_from_depth,
         &third,
         thermal,
-        Some(table),
+        Some(TABLE),
         objects,
         person,
     )
@@ -406,56 +459,8 @@ pub fn tabletop_close(
     phenotype: Phenotype,
     thermal: ThermalPreset,
 ) -> SceneFile {
-    let table = Table {
-        height_m: 0.75,
-        centre_m: [0.0, 0.0],
-        size_m: [1.4, 0.9],
-        temp_c: 22.0,
-        emissivity: 0.93,
-    };
     let n_objects = rng.random_range(1..=3);
-    let mut objects: Vec<SceneObject> = Vec::new();
-    let mut tries = 0;
-    while objects.len() < n_objects && tries < 200 {
-        tries += 1;
-        let (shape, scale) = if rng.random_bool(0.5) {
-            (
-                Shape::Bowl {
-                    cut: rng.random_range(-0.2..0.05),
-                    wall: rng.random_range(0.04..0.08),
-                },
-                rng.random_range(0.06..0.09),
-            )
-        } else {
-            (
-                Shape::Mug {
-                    aspect: rng.random_range(0.9..1.3),
-                    wall: rng.random_range(0.08..0.14),
-                },
-                rng.random_range(0.05..0.07),
-            )
-        };
-        // Side by side across the view, a little depth between them.
-        let base = [
-            rng.random_range(-0.13..0.13),
-            rng.random_range(-0.05..0.05),
-            0.75,
-        ];
-        if objects.iter().any(|o| {
-            ((o.base_m[0] - base[0]).powi(2) + (o.base_m[1] - base[1]).powi(2)).sqrt()
-                < o.scale_m + scale + 0.015
-        }) {
-            continue;
-        }
-        objects.push(SceneObject {
-            shape: shape.into(),
-            base_m: base,
-            yaw_rad: rng.random_range(-3.1..3.1),
-            scale_m: scale,
-            emissivity: 0.91,
-            temp_c: 22.0,
-        });
-    }
+    let objects = place_objects(rng, n_objects, &CLOSE_LAYOUT, 200);
     let n = objects.len().max(1) as f64;
     let (cx, cy) = (
         objects.iter().map(|o| o.base_m[0]).sum::<f64>() / n,
@@ -472,25 +477,13 @@ pub fn tabletop_close(
     let dist = rng.random_range(0.5..2.0f64).max(back + 0.5);
     let angle: f64 = rng.random_range(-0.5..0.5);
     let position = [cx + dist * angle.sin(), cy + dist * angle.cos()];
-    let person = Person {
-        phenotype,
-        rotvec_rad: pose.1,
-        pose_name: pose.0,
-        position_m: position,
-        yaw_rad: rng.random_range(-0.4..0.4),
-        skin_c: 34.0,
-        clothing_c: 30.0,
-    };
-    let third = look_at(
-        Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4),
-        Vector3::new(position[0], position[1], 0.9),
-    );
+    let (person, third) = person_facing_table(rng, pose, phenotype, position);
     assemble(
         22.0,
         &world_from_depth,
         &third,
         thermal,
-        Some(table),
+        Some(TABLE),
         objects,
         person,
     )
