@@ -16,12 +16,13 @@ use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
 use irmirror_recon::human::{HumanProblem, HumanState};
-use irmirror_recon::objects::{Objects, reconstruct_objects};
+use irmirror_recon::objects::{FittedObject, Objects, reconstruct_objects};
 use irmirror_recon::pipeline::{
-    Ablation, BodyPriors, ReconConfig, Reconstruction, reconstruct_human,
+    Ablation, BodyPriors, ReconConfig, Reconstruction, reconstruct_human, reflected_rays,
 };
 use irmirror_recon::{Preprocessed, ReconError, preprocess};
 use irmirror_sim::presets::{Cell, benchmark_scene};
+use irmirror_sim::scene::ObjectShape;
 use irmirror_sim::{SceneFile, Simulation};
 use nalgebra::Vector3;
 use rand_distr::{Distribution, StandardNormal};
@@ -206,6 +207,11 @@ pub const SUCCESS_FACING_DEG: f64 = 30.0;
 pub struct Diagnosis {
     /// The true body mesh's data term.
     pub truth_loss: f64,
+    /// The true body's data term through the *true* objects (rays traced against the
+    /// simulator's shapes; `None` for shapes stage 1 cannot represent): low here but high through
+    /// the fitted objects means stage 1's mirror, not the optimiser or the observation, is off.
+    #[serde(default)]
+    pub truth_loss_true_objects: Option<f64>,
     /// Every reported hypothesis' data term, best first.
     pub hypothesis_losses: Vec<f64>,
     /// Root error of every reported hypothesis, m.
@@ -569,6 +575,17 @@ fn diagnose(
         .map(|v| Vector3::from(v.map(f64::from)))
         .collect();
     let (truth_loss, _) = problem.mesh_data_loss(&truth, &model.asset.faces, &hcfg);
+    let truth_loss_true_objects = true_objects(p, &rec.objects).map(|objects| {
+        let cfg = ReconConfig::default();
+        let rays = reflected_rays(&p.capture, &objects, &rec.pre.mask, &cfg);
+        let through_truth = HumanProblem {
+            rays: &rays,
+            ..problem
+        };
+        through_truth
+            .mesh_data_loss(&truth, &model.asset.faces, &hcfg)
+            .0
+    });
     let hypothesis_losses: Vec<f64> = rec
         .human
         .hypotheses
@@ -591,6 +608,7 @@ fn diagnose(
     );
     Ok(Diagnosis {
         truth_loss,
+        truth_loss_true_objects,
         nearest_root_error_m: hypothesis_root_errors_m
             .iter()
             .copied()
@@ -598,6 +616,34 @@ fn diagnose(
         hypothesis_losses,
         hypothesis_root_errors_m,
         class,
+    })
+}
+
+/// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every
+/// one is a two-parameter shape stage 1 can represent.
+fn true_objects(p: &Prepared, fitted: &Objects) -> Option<Objects> {
+    let objects = p
+        .scene
+        .objects
+        .iter()
+        .zip(&p.sim.object_poses)
+        .map(|(o, pose)| match o.shape {
+            ObjectShape::Simple(shape) => Some(FittedObject {
+                category: shape.category(),
+                shape,
+                depth_from_object: *pose,
+                loss: 0.0,
+                mean_surface_error_m: 0.0,
+                points: 0,
+                loss_curve: vec![],
+                learned: None,
+            }),
+            ObjectShape::Family(_) => None,
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some(Objects {
+        objects,
+        ..fitted.clone()
     })
 }
 
@@ -732,7 +778,7 @@ pub fn diagnosis_table(r: &Report) -> String {
     for k in FailureClass::ALL {
         s.push_str(&format!(" {} |", k.heading()));
     }
-    s.push_str(" full model failed |\n|---|---|---|---|---|---|\n");
+    s.push_str(" full model failed | data term, median: fit / truth / truth through the true objects |\n|---|---|---|---|---|---|---|\n");
     for c in Cell::ALL {
         let caps = of_cell(r, c);
         if caps.is_empty() {
@@ -747,9 +793,34 @@ pub fn diagnosis_table(r: &Report) -> String {
             s.push_str(&format!(" {n} |"));
         }
         let failed = caps.iter().filter(|x| x.diagnosis.is_none()).count();
-        s.push_str(&format!(" {failed} |\n"));
+        let ds: Vec<&Diagnosis> = caps.iter().filter_map(|x| x.diagnosis.as_ref()).collect();
+        let fit: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.hypothesis_losses.first().copied())
+            .collect();
+        let truth: Vec<f64> = ds.iter().map(|d| d.truth_loss).collect();
+        let through: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.truth_loss_true_objects)
+            .collect();
+        s.push_str(&format!(
+            " {failed} | {} / {} / {} |\n",
+            median(&fit),
+            median(&truth),
+            median(&through)
+        ));
     }
     s
+}
+
+/// The median to 3 decimals, or "–".
+fn median(v: &[f64]) -> String {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    match s.len() {
+        0 => "–".into(),
+        n => format!("{:.3}", s[n / 2]),
+    }
 }
 
 /// Stage-1 figures and times per cell.
@@ -864,6 +935,7 @@ mod tests {
     fn diagnosis(class: FailureClass) -> Diagnosis {
         Diagnosis {
             truth_loss: 0.2,
+            truth_loss_true_objects: Some(0.1),
             hypothesis_losses: vec![0.3],
             hypothesis_root_errors_m: vec![0.4],
             nearest_root_error_m: 0.4,
@@ -938,7 +1010,10 @@ mod tests {
             "{t}"
         );
         // Diagnosis counts: one success, one search failure, none by information, one failed.
-        assert!(t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 |"), "{t}");
+        assert!(
+            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 0.300 / 0.200 / 0.100 |"),
+            "{t}"
+        );
         assert!(!t.contains("| car |"), "rows without captures are left out");
         assert!(html(&r, &t).contains("captures/tabletop-mug_02/overlay.png"));
     }
