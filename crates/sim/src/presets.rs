@@ -12,10 +12,12 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Preset {
-    /// 1–3 bowls and mugs on a table; the person 0.5–1.5 m behind the cameras.
+    /// 1–3 bowls and mugs on a table seen from 0.7 m; the person 0.5–1.5 m behind the cameras.
     Tabletop,
     /// The side of a car; a pedestrian 2.5–8 m away.
     Car,
+    /// 1–3 bowls and mugs side by side seen from 0.35–0.5 m ([`crate::scene::tabletop_close`]).
+    TabletopClose,
 }
 
 /// Capture regimes: the rig (thermal camera, lens, distances) a scene is drawn for. Results are
@@ -134,19 +136,14 @@ fn draw_regime(
             }
             scene
         }
-        Regime::Tabletop => {
-            let mut rng = irmirror_geom::rng::seeded(seed, 1000 + attempt);
-            let phenotype = random_phenotype(&mut rng);
-            let (name, rotvecs) = random_pose(model, &mut rng);
-            let mut scene = crate::scene::tabletop_close(
-                &mut rng,
-                (name, rotvecs),
-                phenotype,
-                ThermalPreset::Boson,
-            );
-            family_shapes(&mut scene, shapes, seed, attempt);
-            scene
-        }
+        Regime::Tabletop => draw_scene(
+            model,
+            Preset::TabletopClose,
+            ThermalPreset::Boson,
+            shapes,
+            seed,
+            attempt,
+        ),
     }
 }
 
@@ -215,6 +212,9 @@ fn draw_scene(
     let mut scene = match preset {
         Preset::Tabletop => tabletop(&mut rng, (name, rotvecs), phenotype, thermal),
         Preset::Car => car(&mut rng, (name, rotvecs), phenotype, thermal),
+        Preset::TabletopClose => {
+            crate::scene::tabletop_close(&mut rng, (name, rotvecs), phenotype, thermal)
+        }
     };
     family_shapes(&mut scene, shapes, seed, attempt);
     scene
