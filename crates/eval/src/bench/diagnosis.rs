@@ -1,0 +1,189 @@
+//! The failure diagnosis of a capture's full-model fit: the true body and every reported
+//! hypothesis scored by stage 2's data term through the fitted (and the true) objects.
+
+use super::run::Prepared;
+use crate::EvalError;
+use crate::score::facing_error_deg;
+use crate::views::posed_body;
+use irmirror_recon::human::HumanProblem;
+use irmirror_recon::objects::{FittedObject, Objects};
+use irmirror_recon::pipeline::{BodyPriors, ReconConfig, Reconstruction, reflected_rays};
+use irmirror_sim::scene::ObjectShape;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// What a capture's full-model fit says about why it is off (DESIGN.md §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FailureClass {
+    /// The best hypothesis is within [`SUCCESS_ROOT_M`] and [`SUCCESS_FACING_DEG`] of the truth.
+    Success,
+    /// Off, and the true body scores a lower loss than the fit: the optimiser did not find what
+    /// its loss prefers.
+    Search,
+    /// Off, yet the fit scores at least as low as the truth: the observation (or the model) does
+    /// not tell them apart.
+    Information,
+}
+
+impl FailureClass {
+    /// Every class, in the table's column order.
+    pub const ALL: [FailureClass; 3] = [
+        FailureClass::Success,
+        FailureClass::Search,
+        FailureClass::Information,
+    ];
+
+    /// The column heading.
+    pub fn heading(self) -> &'static str {
+        match self {
+            FailureClass::Success => "success",
+            FailureClass::Search => "search failure",
+            FailureClass::Information => "information / model failure",
+        }
+    }
+}
+
+/// A fit within this root distance of the truth…
+pub const SUCCESS_ROOT_M: f64 = 0.15;
+/// …and this facing angle is a success.
+pub const SUCCESS_FACING_DEG: f64 = 30.0;
+
+/// The full model's fit against the true body, both scored by stage 2's data term
+/// (`1 − soft IoU` on all rays at the final σ) through the *fitted* objects.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// The true body mesh's data term.
+    pub truth_loss: f64,
+    /// The true body's data term through the *true* objects (rays traced against the
+    /// simulator's shapes; `None` for shapes stage 1 cannot represent): low here but high through
+    /// the fitted objects means stage 1's mirror, not the optimiser or the observation, is off.
+    #[serde(default)]
+    pub truth_loss_true_objects: Option<f64>,
+    /// Every reported hypothesis' data term, best first.
+    pub hypothesis_losses: Vec<f64>,
+    /// Root error of every reported hypothesis, m.
+    pub hypothesis_root_errors_m: Vec<f64>,
+    /// Root error of the hypothesis nearest the truth, m.
+    pub nearest_root_error_m: f64,
+    /// The class.
+    pub class: FailureClass,
+}
+
+impl Diagnosis {
+    /// Classifies from the best hypothesis' root and facing errors and the losses.
+    pub fn classify(
+        truth_loss: f64,
+        best_loss: f64,
+        root_error_m: f64,
+        facing_error_deg: Option<f64>,
+    ) -> FailureClass {
+        let facing_ok = facing_error_deg.is_none_or(|f| f <= SUCCESS_FACING_DEG);
+        if root_error_m <= SUCCESS_ROOT_M && facing_ok {
+            FailureClass::Success
+        } else if truth_loss < best_loss {
+            FailureClass::Search
+        } else {
+            FailureClass::Information
+        }
+    }
+}
+
+/// The full model's failure diagnosis: the true body and every reported hypothesis scored by
+/// stage 2's data term through the fitted objects.
+pub(super) fn diagnose(
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+) -> Result<Diagnosis, EvalError> {
+    let BodyPriors { model, prior } = priors;
+    let hcfg = ReconConfig::default().human_settings();
+    let problem = HumanProblem {
+        model,
+        prior,
+        rays: &rec.rays,
+        mask: &rec.pre.mask,
+        up: rec.objects.ground.n(),
+        objects_centre: Vector3::zeros(),
+        floor: None,
+    };
+    let truth: Vec<Vector3<f64>> = p
+        .sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect();
+    let (truth_loss, _) = problem.mesh_data_loss(&truth, &model.asset.faces, &hcfg);
+    let truth_loss_true_objects = true_objects(p, &rec.objects).map(|objects| {
+        let cfg = ReconConfig::default();
+        let rays = reflected_rays(&p.capture, &objects, &rec.pre.mask, &cfg);
+        let through_truth = HumanProblem {
+            rays: &rays,
+            ..problem
+        };
+        through_truth
+            .mesh_data_loss(&truth, &model.asset.faces, &hcfg)
+            .0
+    });
+    let hypothesis_losses: Vec<f64> = rec
+        .human
+        .hypotheses
+        .iter()
+        .map(|h| 1.0 - h.soft_iou)
+        .collect();
+    let true_root = p.sim.body.joints[0];
+    let hypothesis_root_errors_m: Vec<f64> = rec
+        .states
+        .iter()
+        .map(|st| posed_body(model, prior, st).map(|b| (b.joints[0] - true_root).norm()))
+        .collect::<Result<_, _>>()?;
+    let best = posed_body(model, prior, &rec.states[0])?;
+    let facing = facing_error_deg(&best.keypoints, &p.sim.body.keypoints);
+    let class = Diagnosis::classify(
+        truth_loss,
+        hypothesis_losses[0],
+        hypothesis_root_errors_m[0],
+        facing,
+    );
+    Ok(Diagnosis {
+        truth_loss,
+        truth_loss_true_objects,
+        nearest_root_error_m: hypothesis_root_errors_m
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min),
+        hypothesis_losses,
+        hypothesis_root_errors_m,
+        class,
+    })
+}
+
+/// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every
+/// one is a two-parameter shape stage 1 can represent.
+fn true_objects(p: &Prepared, fitted: &Objects) -> Option<Objects> {
+    let objects = p
+        .scene
+        .objects
+        .iter()
+        .zip(&p.sim.object_poses)
+        .map(|(o, pose)| match o.shape {
+            ObjectShape::Simple(shape) => Some(FittedObject {
+                category: shape.category(),
+                shape,
+                depth_from_object: *pose,
+                loss: 0.0,
+                mean_surface_error_m: 0.0,
+                points: 0,
+                loss_curve: vec![],
+                learned: None,
+            }),
+            ObjectShape::Family(_) => None,
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some(Objects {
+        objects,
+        ..fitted.clone()
+    })
+}

@@ -1,0 +1,369 @@
+//! The Table-1 benchmark on simulated captures (DESIGN.md §5).
+//!
+//! Each capture is simulated deterministically from its seed, reconstructed once up to stage 1,
+//! then stage 2 runs four times from the same objects: without edge sampling, without sphere
+//! tracing, without surface smoothing, and the full model. The **Random** baseline puts random
+//! pose-prior samples (N(0, I) latents, [`RANDOM_DRAWS`] per capture) at the true root position
+//! and orientation, as the paper's HumanEva draw. Writes `table.md` (Table 1 layout, means with
+//! 95 % intervals), `results.json` (per capture), `report.html` (with thumbnails) and `run.toml`.
+
+mod diagnosis;
+mod run;
+mod table;
+
+pub use diagnosis::{Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M};
+pub use run::run;
+pub use table::{diagnosis_table, markdown_table};
+
+use crate::EvalError;
+use crate::score::Evaluation;
+use irmirror_recon::pipeline::Ablation;
+use irmirror_sim::presets::Cell;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Benchmark sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum Set {
+    /// 8 captures per cell (32); the ablation columns on the first 2 of each cell.
+    Quick,
+    /// 60 captures per cell (240), NETD varied; the ablation columns on the first 10 of each.
+    Full,
+}
+
+impl Set {
+    /// Captures per cell.
+    pub fn per_cell(self) -> usize {
+        match self {
+            Set::Quick => 8,
+            Set::Full => 60,
+        }
+    }
+
+    /// The first this many captures of each cell also run the ablations.
+    pub fn ablated_per_cell(self) -> usize {
+        match self {
+            Set::Quick => 2,
+            Set::Full => 10,
+        }
+    }
+}
+
+/// One capture of a set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planned {
+    /// Identifier (`<cell>_<index>`).
+    pub id: String,
+    /// The cell.
+    pub cell: Cell,
+    /// Index within its cell.
+    pub index: usize,
+    /// Scene seed.
+    pub seed: u64,
+    /// Thermal NETD, mK.
+    pub netd_mk: f64,
+}
+
+/// A stage-2 variant: Table 1's columns (ablations, then the full model).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Variant {
+    /// Without edge sampling.
+    NoEdgeSampling,
+    /// Without sphere tracing.
+    NoSphereTracing,
+    /// Without surface smoothing.
+    NoSmoothing,
+    /// The full model.
+    Full,
+}
+
+impl Variant {
+    /// Every variant, in the table's column order.
+    pub const ALL: [Variant; 4] = [
+        Variant::NoEdgeSampling,
+        Variant::NoSphereTracing,
+        Variant::NoSmoothing,
+        Variant::Full,
+    ];
+
+    /// The column heading.
+    pub fn heading(self) -> &'static str {
+        match self {
+            Variant::NoEdgeSampling => "w/o edge sampling",
+            Variant::NoSphereTracing => "w/o sphere tracing",
+            Variant::NoSmoothing => "w/o surface smoothing",
+            Variant::Full => "full model",
+        }
+    }
+
+    /// The ablation it switches on (`None`: the full model).
+    pub fn ablation(self) -> Option<Ablation> {
+        match self {
+            Variant::NoEdgeSampling => Some(Ablation::EdgeSampling),
+            Variant::NoSphereTracing => Some(Ablation::SphereTracing),
+            Variant::NoSmoothing => Some(Ablation::Smoothing),
+            Variant::Full => None,
+        }
+    }
+}
+/// Random pose draws per capture for the baseline.
+pub const RANDOM_DRAWS: usize = 8;
+/// Seeds of the benchmark start here (held out from the demo's and tests' small seeds).
+pub const SEED_BASE: u64 = 10_000;
+
+/// One stage-2 run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VariantResult {
+    /// Figures (`None` when the reconstruction failed).
+    pub eval: Option<Evaluation>,
+    /// Why the reconstruction failed (a failure is a result, not an abort).
+    pub error: Option<String>,
+    /// Stage-2 seconds (rays + fit).
+    pub time_s: f64,
+}
+
+/// One capture.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CaptureResult {
+    /// Identifier (`<cell>_<index>`).
+    pub id: String,
+    /// The benchmark cell (regime and object type).
+    pub cell: Cell,
+    /// Scene seed.
+    pub seed: u64,
+    /// Thermal NETD, mK.
+    pub netd_mk: f64,
+    /// Thermal image width, pixels (160: Lepton-like, 640: Boson-like).
+    pub thermal_width: u32,
+    /// Reflection size in the truth, thermal pixels.
+    pub reflection_pixels: usize,
+    /// True root distance from the depth camera, m.
+    pub person_distance_m: f64,
+    /// Stage 0–1 seconds.
+    pub objects_time_s: f64,
+    /// Chamfer between fitted and true object meshes, mm² (mean of both directions' mean
+    /// squared point-to-surface distances), per object.
+    pub object_chamfer_mm2: Vec<f64>,
+    /// Per variant.
+    pub variants: BTreeMap<Variant, VariantResult>,
+    /// Random baseline draws.
+    pub random: Vec<Evaluation>,
+    /// The full model's failure diagnosis (`None` when it failed).
+    pub diagnosis: Option<Diagnosis>,
+}
+
+/// The whole report (what `results.json` holds).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// Set.
+    pub set: Set,
+    /// Version.
+    pub version: String,
+    /// Per capture.
+    pub captures: Vec<CaptureResult>,
+}
+
+/// The benchmark's captures, cell by cell.
+pub fn captures(set: Set) -> Vec<Planned> {
+    let mut out = Vec::new();
+    for (c, cell) in Cell::ALL.iter().enumerate() {
+        for index in 0..set.per_cell() {
+            let netd_mk = match set {
+                Set::Quick => 50.0,
+                Set::Full => [30.0, 50.0, 80.0][index % 3],
+            };
+            out.push(Planned {
+                id: format!("{cell}_{index:02}"),
+                cell: *cell,
+                index,
+                seed: SEED_BASE + 1000 * c as u64 + index as u64,
+                netd_mk,
+            });
+        }
+    }
+    out
+}
+
+/// Which part of a set to run.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    /// Only the first N captures of each object type.
+    pub limit: Option<usize>,
+    /// Only this cell.
+    pub cell: Option<Cell>,
+    /// Only the full model.
+    pub full_only: bool,
+}
+
+/// What the runner reports while it works.
+pub trait BenchProgress {
+    /// The number of stage-2 runs ahead.
+    fn start(&self, runs: u64);
+    /// A capture begins.
+    fn capture(&self, id: &str);
+    /// `n` stage-2 runs finished (or were skipped after a failed stage 1).
+    fn runs_done(&self, n: u64);
+}
+
+/// The captures of `selection`, in the set's order.
+pub fn selected(set: Set, selection: &Selection) -> Result<Vec<Planned>, EvalError> {
+    if selection.limit == Some(0) {
+        return Err(EvalError::Selection(
+            "--limit 0 selects no capture; give at least 1".into(),
+        ));
+    }
+    let mut list = captures(set);
+    if let Some(l) = selection.limit {
+        list.retain(|p| p.index < l);
+    }
+    if let Some(c) = selection.cell {
+        list.retain(|p| p.cell == c);
+    }
+    Ok(list)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::table::html;
+    use super::*;
+
+    fn eval(x: f64) -> Evaluation {
+        Evaluation {
+            root_error_m: x,
+            person_distance_m: 2.0,
+            keypoints_2d_normalised: Some(x),
+            keypoints_3d_normalised: None,
+            mpjpe_m: Some(x),
+            pa_mpjpe_m: Some(x / 2.0),
+            vertex_error_m: Some(x),
+            facing_error_deg: Some(10.0 * x),
+            reflection_iou: 0.5,
+            object_translation_error_m: vec![0.001],
+            object_scale_error_pct: vec![1.0],
+        }
+    }
+
+    fn diagnosis(class: FailureClass) -> Diagnosis {
+        Diagnosis {
+            truth_loss: 0.2,
+            truth_loss_true_objects: Some(0.1),
+            hypothesis_losses: vec![0.3],
+            hypothesis_root_errors_m: vec![0.4],
+            nearest_root_error_m: 0.4,
+            class,
+        }
+    }
+
+    #[test]
+    fn report_round_trips_and_the_table_has_every_cell() {
+        let captures = (0..3)
+            .map(|k| CaptureResult {
+                id: format!("tabletop-mug_{k:02}"),
+                cell: Cell::TabletopMug,
+                seed: k,
+                netd_mk: 50.0,
+                thermal_width: 640,
+                reflection_pixels: 200,
+                person_distance_m: 2.0,
+                objects_time_s: 0.5,
+                object_chamfer_mm2: vec![0.25],
+                variants: Variant::ALL
+                    .iter()
+                    // The ablations ran on the first two captures only.
+                    .filter(|&&v| v == Variant::Full || k < 2)
+                    .map(|&v| {
+                        // One failure: the full model on the last capture.
+                        let failed = v == Variant::Full && k == 2;
+                        (
+                            v,
+                            VariantResult {
+                                eval: (!failed).then(|| eval(k as f64)),
+                                error: failed.then(|| "x".to_string()),
+                                time_s: 1.0,
+                            },
+                        )
+                    })
+                    .collect(),
+                random: vec![eval(1.0), eval(3.0)],
+                diagnosis: (k < 2)
+                    .then(|| diagnosis([FailureClass::Search, FailureClass::Success][k as usize])),
+            })
+            .collect();
+        let r = Report {
+            set: Set::Quick,
+            version: "x".into(),
+            captures,
+        };
+        let json = serde_json::to_string(&r).unwrap();
+        assert_eq!(serde_json::from_str::<Report>(&json).unwrap(), r);
+        let t = markdown_table(&r);
+        // Ablations on captures 0 and 1: mean 0.5, sd 0.707, t(1) 12.706 → ± 6.353, n = 2 shown.
+        // The full model failed on capture 2: its mean is over the two others too; Random: mean
+        // of (1 + 3)/2 = 2 on all three.
+        assert!(
+            t.contains("| root error (m) | tabletop-mug | 3 | 0.500 ± 6.353 (n = 2) |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| 0.500 ± 6.353 (n = 2) | 2.000 ± 0.000 |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 1 of 3 | – |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| mean per-vertex error (m) | tabletop-mug | 3 |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| 3-D keypoints, normalised | tabletop-mug | 3 | n/a |"),
+            "{t}"
+        );
+        // Diagnosis counts: one success, one search failure, none by information, one failed.
+        assert!(
+            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 0.300 / 0.200 / 0.100 |"),
+            "{t}"
+        );
+        assert!(!t.contains("| car |"), "rows without captures are left out");
+        assert!(html(&r, &t).contains("captures/tabletop-mug_02/overlay.png"));
+    }
+
+    #[test]
+    fn failures_are_classified_by_distance_then_loss() {
+        use FailureClass::*;
+        assert_eq!(Diagnosis::classify(0.1, 0.2, 0.05, Some(10.0)), Success);
+        assert_eq!(Diagnosis::classify(0.1, 0.2, 0.5, Some(10.0)), Search);
+        assert_eq!(Diagnosis::classify(0.3, 0.2, 0.5, Some(10.0)), Information);
+        assert_eq!(
+            Diagnosis::classify(0.3, 0.2, 0.05, Some(150.0)),
+            Information
+        );
+        assert_eq!(Diagnosis::classify(0.1, 0.2, 0.05, Some(150.0)), Search);
+    }
+
+    #[test]
+    fn benchmark_sets_are_fixed() {
+        assert_eq!(captures(Set::Quick).len(), 32);
+        assert_eq!(captures(Set::Full).len(), 240);
+        let mug = &captures(Set::Quick)[8];
+        assert_eq!(
+            (mug.id.as_str(), mug.cell, mug.seed, mug.netd_mk),
+            ("tabletop-mug_00", Cell::TabletopMug, SEED_BASE + 1000, 50.0)
+        );
+        let limited = Selection {
+            limit: Some(2),
+            cell: Some(Cell::Car),
+            full_only: false,
+        };
+        assert_eq!(selected(Set::Quick, &limited).unwrap().len(), 2);
+        let none = Selection {
+            limit: Some(0),
+            ..Selection::default()
+        };
+        assert!(selected(Set::Quick, &none).is_err());
+    }
+}

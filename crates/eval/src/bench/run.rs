@@ -1,0 +1,284 @@
+//! Running the benchmark: simulate each capture, stage 0–1 once, stage 2 per variant, the
+//! Random baseline and the diagnosis, then the report files.
+
+use super::diagnosis::diagnose;
+use super::table::{html, markdown_table};
+use super::{
+    BenchProgress, CaptureResult, Planned, RANDOM_DRAWS, Report, Selection, Set, Variant,
+    VariantResult, selected,
+};
+use crate::EvalError;
+use crate::output::{Staging, save_png, write_text};
+use crate::score::{Evaluation, evaluate, fitted_mask, third_view};
+use crate::views::{object_mesh, overlay, posed_body};
+use irmirror_body::BodyModel;
+use irmirror_body::prior::PosePrior;
+use irmirror_capture::Capture;
+use irmirror_recon::human::HumanState;
+use irmirror_recon::objects::{Objects, reconstruct_objects};
+use irmirror_recon::pipeline::{BodyPriors, ReconConfig, reconstruct_human};
+use irmirror_recon::{Preprocessed, ReconError, preprocess};
+use irmirror_sim::presets::{Cell, benchmark_scene};
+use irmirror_sim::{SceneFile, Simulation};
+use nalgebra::Vector3;
+use rand_distr::{Distribution, StandardNormal};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+struct Silent;
+impl irmirror_recon::pipeline::Progress for Silent {
+    fn stage(&self, _: &str, _: u64) {}
+    fn tick(&self) {}
+}
+
+fn chamfer_mm2(a: &irmirror_geom::TriMesh, b: &irmirror_geom::TriMesh) -> f64 {
+    irmirror_sdf::quality::chamfer(a, b, 5000, 0) * 1e6
+}
+
+/// Everything one capture's runs share.
+pub(super) struct Prepared {
+    pub(super) scene: SceneFile,
+    pub(super) sim: Simulation,
+    pub(super) capture: Capture,
+    pub(super) pre: Preprocessed,
+    /// When stage 0 started (stage 0–1 time).
+    t0: Instant,
+}
+
+/// Runs the benchmark (the `selection` of it) into `out`; returns the report, its Markdown
+/// table and the directory written.
+pub fn run(
+    set: Set,
+    out: &Path,
+    selection: &Selection,
+    progress: &dyn BenchProgress,
+) -> Result<(Report, String, PathBuf), EvalError> {
+    let list = selected(set, selection)?;
+    let model = BodyModel::builtin()?;
+    let prior = PosePrior::builtin_f64()?;
+    let priors = BodyPriors {
+        model: &model,
+        prior: &prior,
+    };
+    let stage = Staging::new(out, "table.md")?;
+    // The ablation columns run on the first captures of each cell (all of them unless
+    // --full-only): the full model on every capture.
+    let variants_of = |plan: &Planned| -> Vec<Variant> {
+        let ablate = !selection.full_only && plan.index < set.ablated_per_cell();
+        Variant::ALL
+            .iter()
+            .copied()
+            .filter(|v| ablate || *v == Variant::Full)
+            .collect()
+    };
+    progress.start(list.iter().map(|p| variants_of(p).len() as u64).sum());
+    let scratch = stage.path("scratch");
+    let mut results = Vec::new();
+    for plan in &list {
+        let id = &plan.id;
+        progress.capture(id);
+        let p = prepare(&model, plan, &scratch)?;
+        let thumbs = stage.path(&format!("captures/{id}"));
+        std::fs::create_dir_all(&thumbs).map_err(|e| EvalError::Output {
+            path: thumbs.clone(),
+            reason: e.to_string(),
+        })?;
+        results.push(run_capture(
+            &p,
+            plan,
+            priors,
+            &variants_of(plan),
+            &thumbs,
+            progress,
+        )?);
+    }
+    std::fs::remove_dir_all(&scratch).ok();
+    let report = Report {
+        set,
+        version: env!("CARGO_PKG_VERSION").into(),
+        captures: results,
+    };
+    let table = markdown_table(&report);
+    let ser = |e: &dyn std::fmt::Display| EvalError::Serialise(e.to_string());
+    write_text(
+        &stage.path("results.json"),
+        &serde_json::to_string_pretty(&report).map_err(|e| ser(&e))?,
+    )?;
+    write_text(&stage.path("table.md"), &table)?;
+    write_text(&stage.path("report.html"), &html(&report, &table))?;
+    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS });
+    write_text(
+        &stage.path("run.toml"),
+        &toml::to_string(&record).map_err(|e| ser(&e))?,
+    )?;
+    let dir = stage.commit()?;
+    Ok((report, table, dir))
+}
+
+/// Simulates the capture, reads it back through the loader and runs stage 0, drawing again until
+/// stage 0 sees the reflection through the sensor noise: the benchmark measures reconstruction
+/// from a visible reflection.
+fn prepare(model: &BodyModel, plan: &Planned, scratch: &Path) -> Result<Prepared, EvalError> {
+    let cfg = ReconConfig::default();
+    let (seed, mut first) = (plan.seed, 0);
+    loop {
+        let (scene, attempt) = benchmark_scene(model, plan.cell, seed, plan.netd_mk, first)?;
+        let sim = irmirror_sim::simulate(model, &scene, seed)?;
+        let dir = scratch.join(&plan.id);
+        sim.write(model, &dir, seed)?;
+        let capture = Capture::load(&dir)?;
+        std::fs::remove_dir_all(&dir).ok();
+        let t0 = Instant::now();
+        match preprocess(&capture, &cfg.preprocess) {
+            Ok(pre) => {
+                return Ok(Prepared {
+                    scene,
+                    sim,
+                    capture,
+                    pre,
+                    t0,
+                });
+            }
+            Err(ReconError::NoReflection { .. }) => first = attempt + 1,
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+/// Stage 1 once, stage 2 per variant, and the Random baseline, for one prepared capture.
+fn run_capture(
+    p: &Prepared,
+    plan: &Planned,
+    priors: BodyPriors<'_>,
+    variants: &[Variant],
+    thumbs: &Path,
+    progress: &dyn BenchProgress,
+) -> Result<CaptureResult, EvalError> {
+    let BodyPriors { model, prior } = priors;
+    let cfg = ReconConfig::default();
+    let (id, seed) = (plan.id.as_str(), plan.seed);
+    let mut result = CaptureResult {
+        id: id.to_string(),
+        cell: plan.cell,
+        seed,
+        netd_mk: plan.netd_mk,
+        thermal_width: p.capture.thermal_camera.width,
+        reflection_pixels: p.sim.report.reflection_pixels,
+        person_distance_m: p.sim.body.joints[0].norm(),
+        objects_time_s: 0.0,
+        object_chamfer_mm2: vec![],
+        variants: BTreeMap::new(),
+        random: vec![],
+        diagnosis: None,
+    };
+    let objects = reconstruct_objects(&p.capture, &cfg.objects, seed);
+    result.objects_time_s = p.t0.elapsed().as_secs_f64();
+    let objects = match objects {
+        Ok(o) => o,
+        Err(e) => {
+            tracing::warn!("{id}: stage 1 failed: {e}");
+            let failed = VariantResult {
+                eval: None,
+                error: Some(format!("stage 1: {e}")),
+                time_s: 0.0,
+            };
+            result.variants = variants.iter().map(|&v| (v, failed.clone())).collect();
+            progress.runs_done(variants.len() as u64);
+            return Ok(result);
+        }
+    };
+    result.object_chamfer_mm2 = objects
+        .objects
+        .iter()
+        .zip(&p.sim.object_meshes)
+        .map(|(o, m)| Ok(chamfer_mm2(&object_mesh(o)?, m)))
+        .collect::<Result<_, EvalError>>()?;
+    for &variant in variants {
+        let cfg = ReconConfig {
+            ablate: variant.ablation().into_iter().collect(),
+            ..ReconConfig::default()
+        };
+        let t0 = Instant::now();
+        let rec = match reconstruct_human(
+            &p.capture,
+            p.pre.clone(),
+            objects.clone(),
+            priors,
+            &cfg,
+            seed,
+            &Silent,
+        ) {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!("{id}: stage 2 ({}) failed: {e}", variant.heading());
+                let failed = VariantResult {
+                    eval: None,
+                    error: Some(e.to_string()),
+                    time_s: t0.elapsed().as_secs_f64(),
+                };
+                result.variants.insert(variant, failed);
+                progress.runs_done(1);
+                continue;
+            }
+        };
+        let time_s = t0.elapsed().as_secs_f64();
+        let body = posed_body(model, prior, &rec.states[0])?;
+        let mask = fitted_mask(model, &rec.rays, &body);
+        let eval = Some(evaluate(&p.sim, &body, &mask, &rec.objects)?);
+        if variant == Variant::Full {
+            result.diagnosis = Some(diagnose(p, priors, &rec)?);
+            save_png(
+                &overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
+                &thumbs.join("overlay.png"),
+            )?;
+            let view = third_view(&p.sim, model, &body, &rec.objects)?;
+            save_png(
+                &image::imageops::thumbnail(&view, 160, 120),
+                &thumbs.join("third.png"),
+            )?;
+        }
+        let done = VariantResult {
+            eval,
+            error: None,
+            time_s,
+        };
+        result.variants.insert(variant, done);
+        progress.runs_done(1);
+    }
+    result.random = random_baseline(p, priors, &objects, seed)?;
+    Ok(result)
+}
+
+/// The Random baseline: [`RANDOM_DRAWS`] pose-prior samples at the true root position and
+/// orientation.
+fn random_baseline(
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    objects: &Objects,
+    seed: u64,
+) -> Result<Vec<Evaluation>, EvalError> {
+    let BodyPriors { model, prior } = priors;
+    let mut rng = irmirror_geom::rng::seeded(seed, 99);
+    let truth_root = p.sim.body.depth_from_anny.rotation
+        * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(
+            p.scene.person.rotvec_rad[0],
+        ));
+    let cfg = ReconConfig::default();
+    let rays = irmirror_recon::pipeline::reflected_rays(&p.capture, objects, &p.pre.mask, &cfg);
+    (0..RANDOM_DRAWS)
+        .map(|_| {
+            let latent: Vec<f64> = (0..irmirror_body::prior::LATENT)
+                .map(|_| StandardNormal.sample(&mut rng))
+                .collect();
+            let st = HumanState {
+                translation: p.sim.body.joints[0],
+                rotation: truth_root,
+                latent,
+            };
+            let body = posed_body(model, prior, &st)?;
+            let mask = fitted_mask(model, &rays, &body);
+            evaluate(&p.sim, &body, &mask, objects)
+        })
+        .collect()
+}
