@@ -230,6 +230,29 @@ fn benches_print_their_tables() {
         "--no-dense",
     ]);
     assert!(!o.status.success() && stderr(&o).contains("/nonexistent/scene.json"));
+    // Reflection size per regime: one seed each, the table and the histogram.
+    let png = tmp("regimes").with_extension("png");
+    let o = irmirror(&[
+        "bench",
+        "regimes",
+        "--seeds",
+        "1",
+        "--png",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for row in [
+        "| tabletop | 640×512 | 1 |",
+        "| car | 640×512 | 1 |",
+        "| tabletop-wide | 160×120 | 1 |",
+    ] {
+        assert!(out.contains(row), "{out}");
+    }
+    assert!(image::open(&png).is_ok());
+    std::fs::remove_file(&png).ok();
+    let o = irmirror(&["bench", "regimes", "--seeds", "0"]);
+    assert!(!o.status.success() && stderr(&o).contains("--seeds"));
     let o = irmirror(&["bench", "body", "--reps", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(String::from_utf8_lossy(&o.stdout).contains("| backward"));

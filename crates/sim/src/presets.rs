@@ -122,8 +122,7 @@ fn draw_regime(
             // between the car and the pedestrian (at least 2 m in front of them). Its own stream:
             // the rest of the scene is the preset's, draw for draw.
             let mut rng = irmirror_geom::rng::seeded(seed, 3000 + attempt);
-            let door_y = -0.95;
-            let person_from_door = door_y - scene.person.position_m[1];
+            let person_from_door = crate::scene::CAR_SIDE_Y_M - scene.person.position_m[1];
             let room = (person_from_door - 1.5 - 2.0).clamp(0.0, 1.5);
             let back = rng.random_range(0.0..=room);
             if let Ok(pose) = scene.depth_camera.world_from_camera.to_rigid() {

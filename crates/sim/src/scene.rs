@@ -520,6 +520,10 @@ fn assemble(
     }
 }
 
+/// The side of the presets' car nearest the cameras: world y, metres (the car is centred on the
+/// origin, its length along x).
+pub const CAR_SIDE_Y_M: f64 = -0.95;
+
 /// The car preset: the side of a car seen from 2–3 m, a pedestrian 2–8 m away from the car.
 pub fn car(
     rng: &mut impl Rng,
@@ -540,7 +544,7 @@ pub fn car(
         emissivity: 0.93,
         temp_c: 20.0,
     };
-    // Cameras 1.5 m from the car's side (y ≈ −0.95 m) at 1.2 m height, looking at the door.
+    // Cameras 1.5 m from the car's side (`CAR_SIDE_Y_M`) at 1.2 m height, looking at the door.
     let eye = Vector3::new(rng.random_range(-0.5..0.5), -2.45, 1.2);
     let world_from_depth = look_at(eye, Vector3::new(eye.x, 0.0, 0.8));
     // Pedestrian behind the cameras, 2.5–8 m from the car, where the door's mirror image of
@@ -548,7 +552,7 @@ pub fn car(
     let dist = rng.random_range(2.5..8.0);
     let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     let lateral: f64 = side * rng.random_range(0.5..(0.4 * (dist + 0.6f64)).max(0.6));
-    let position = [eye.x + lateral, -0.95 - dist];
+    let position = [eye.x + lateral, CAR_SIDE_Y_M - dist];
     let person = Person {
         phenotype,
         rotvec_rad: pose.1,

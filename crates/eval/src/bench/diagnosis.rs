@@ -134,13 +134,16 @@ pub(super) fn diagnose(
         .map(|h| 1.0 - h.soft_iou)
         .collect();
     let true_root = p.sim.body.joints[0];
-    let hypothesis_root_errors_m: Vec<f64> = rec
+    let bodies = rec
         .states
         .iter()
-        .map(|st| posed_body(model, prior, st).map(|b| (b.joints[0] - true_root).norm()))
-        .collect::<Result<_, _>>()?;
-    let best = posed_body(model, prior, &rec.states[0])?;
-    let facing = facing_error_deg(&best.keypoints, &p.sim.body.keypoints);
+        .map(|st| posed_body(model, prior, st))
+        .collect::<Result<Vec<_>, _>>()?;
+    let hypothesis_root_errors_m: Vec<f64> = bodies
+        .iter()
+        .map(|b| (b.joints[0] - true_root).norm())
+        .collect();
+    let facing = facing_error_deg(&bodies[0].keypoints, &p.sim.body.keypoints);
     let class = Diagnosis::classify(
         truth_loss,
         hypothesis_losses[0],
