@@ -22,6 +22,7 @@ pub mod fk;
 pub mod import;
 pub mod keypoints;
 pub mod lbs;
+pub mod mocap;
 pub mod model;
 pub mod phenotype;
 pub mod prior;

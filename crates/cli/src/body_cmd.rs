@@ -44,6 +44,26 @@ pub enum BodyCommand {
         #[arg(long)]
         tolerance_m: Option<f64>,
     },
+    /// Retarget BVH motion capture to the body's 36 bones (the benchmark's persons).
+    ///
+    /// Matches bone directions (pelvis frame, then each bone's smallest swing, parents first);
+    /// keeps every N-th frame (from N/2). Writes a safetensors set (`rotvecs` N × 36 × 3 with the sources
+    /// and provenance as metadata) and a PNG preview sheet beside it.
+    ///
+    /// Example: irmirror body retarget-bvh 1.bvh test2.bvh --every 120 --out poses.safetensors
+    RetargetBvh {
+        /// BVH files (Mixamo-like or Rigify-like joint names).
+        files: Vec<PathBuf>,
+        /// Keep every N-th frame (120: every 4 s at 30 fps).
+        #[arg(long, default_value_t = 120, value_parser = clap::value_parser!(u64).range(1..))]
+        every: u64,
+        /// Provenance recorded in the file (source package, licence).
+        #[arg(long, default_value = "")]
+        provenance: String,
+        /// Output file (.safetensors).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Write a few posed bodies (PLY) and a PNG preview sheet.
     Sample {
         /// Output directory.
@@ -162,6 +182,12 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             }
             Ok(())
         }
+        BodyCommand::RetargetBvh {
+            files,
+            every,
+            provenance,
+            out,
+        } => retarget_bvh(&files, every as usize, &provenance, &out),
         BodyCommand::Sample {
             out,
             seed,
@@ -222,4 +248,75 @@ pub fn run(cmd: BodyCommand, progress: bool) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// `irmirror body retarget-bvh`: every `every`-th frame of each file, retargeted; the set and a
+/// preview of its first poses (mean adult) beside it. Nothing is written on error.
+fn retarget_bvh(files: &[PathBuf], every: usize, provenance: &str, out: &Path) -> Result<()> {
+    use irmirror_body::mocap::{Bvh, MocapSet, Retarget};
+    if files.is_empty() {
+        bail!("no BVH files given");
+    }
+    let model = BodyModel::builtin()?;
+    let shaped = model.shaped_phenotype::<f64>(&Phenotype::default())?;
+    let mut set = MocapSet {
+        poses: vec![],
+        sources: vec![],
+        provenance: provenance.to_string(),
+    };
+    for f in files {
+        let text =
+            std::fs::read_to_string(f).with_context(|| format!("reading {}", f.display()))?;
+        let name = f
+            .file_name()
+            .map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into());
+        let bvh = Bvh::parse(&text, &name)?;
+        let r = Retarget::new(&model, &shaped, &bvh)?;
+        let before = set.poses.len();
+        // Mid-interval frames: a capture's first frame is often its calibration T-pose.
+        for k in (every / 2..bvh.frames.len()).step_by(every) {
+            if let Some(p) = r.frame(&bvh, k) {
+                set.poses.push(p);
+                set.sources.push(format!("{name}:{k}"));
+            }
+        }
+        println!(
+            "{name}: {} joints, {} frames → {} poses",
+            bvh.names.len(),
+            bvh.frames.len(),
+            set.poses.len() - before
+        );
+    }
+    if set.poses.is_empty() {
+        bail!("no usable frame in the BVH files");
+    }
+    let bytes = set.to_bytes()?;
+    let shaped32 = model.shaped_phenotype::<f32>(&Phenotype::default())?;
+    let meshes = set
+        .poses
+        .iter()
+        .take(12)
+        .map(|rotvecs| {
+            let r32: Vec<[f32; 3]> = rotvecs.iter().map(|w| w.map(|x| x as f32)).collect();
+            let posed = model.pose(
+                &shaped32,
+                &Pose::from_axis_angles(&r32, shaped32.joint_heads[0]),
+            )?;
+            Ok(model.mesh(&posed))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let refs: Vec<_> = meshes.iter().collect();
+    let preview = out.with_extension("png");
+    let tmp = out.with_extension("safetensors.partial");
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    save_png(&preview_sheet(&refs, 160), &preview)?;
+    std::fs::rename(&tmp, out).with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "wrote {} poses to {} (preview of the first {}: {})",
+        set.poses.len(),
+        out.display(),
+        refs.len(),
+        preview.display()
+    );
+    Ok(())
 }

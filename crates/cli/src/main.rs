@@ -151,6 +151,10 @@ enum Command {
         /// Only the full model (no ablation columns).
         #[arg(long)]
         full_only: bool,
+        /// Keep every simulated capture (captures/<id>/capture, with its truth/) for
+        /// `irmirror reconstruct`.
+        #[arg(long)]
+        keep_captures: bool,
     },
     /// Train an object shape prior (DeepSDF auto-decoder) for one category.
     ///
@@ -287,6 +291,7 @@ fn main() -> std::process::ExitCode {
             limit,
             cell,
             full_only,
+            keep_captures,
         } => eval_cmd::run(
             preset,
             &out,
@@ -294,6 +299,7 @@ fn main() -> std::process::ExitCode {
                 limit: limit.map(|l| l as usize),
                 cell,
                 full_only,
+                keep_captures,
             },
             progress,
         ),

@@ -251,13 +251,14 @@ pub fn print_summary(rec: &Reconstruction) {
     for (k, h) in rec.human.hypotheses.iter().enumerate() {
         let t = h.translation_m;
         println!(
-            "stage 2: hypothesis {k}: loss {:.3} (soft IoU {:.2}), root at ({:.2}, {:.2}, {:.2}) m, {:.2} m from the camera",
+            "stage 2: hypothesis {k}: loss {:.3} (soft IoU {:.2}), root at ({:.2}, {:.2}, {:.2}) m, {:.2} m from the camera, stature {:.2} m",
             h.loss,
             h.soft_iou,
             t[0],
             t[1],
             t[2],
-            (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt()
+            (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt(),
+            h.stature_m
         );
     }
     if rec.human.hypotheses.len() > 1 {

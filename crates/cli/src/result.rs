@@ -264,20 +264,29 @@ pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> 
     s += "</table>";
     s += &format!(
         "<h3>Person (stage 2)</h3><p>{} reflected rays see past the objects; {} of them are in the reflection mask. \
-         A small reflection leaves the person's placement ambiguous: the table lists the distinct hypotheses kept, best first.</p>\
-         <table><tr><th>#</th><th>loss</th><th>soft IoU</th><th>root (m, depth frame)</th><th>distance (m)</th><th>mesh</th></tr>",
-        rec.human.rays, rec.human.mask_rays
+         The search scored {} candidates (every facing direction, distances along the reflected rays, pose modes) and refined the best; \
+         the table lists the distinct hypotheses kept, best first, with the best one's front/back partner (turned ≈ 180°) when one was refined: \
+         a silhouette seen in a mirror barely tells a person facing it from one facing away, so compare their losses.</p>\
+         <table><tr><th>#</th><th>loss</th><th>soft IoU</th><th>root (m, depth frame)</th><th>distance (m)</th><th>turned from #0 (°)</th><th>stature (m)</th><th>mesh</th></tr>",
+        rec.human.rays, rec.human.mask_rays, rec.human.candidates
     );
-    for (k, h) in rec.human.hypotheses.iter().enumerate() {
+    let up = rec.objects.ground.n();
+    for (k, (h, st)) in rec.human.hypotheses.iter().zip(&rec.states).enumerate() {
         let t = h.translation_m;
+        let turned = irmirror_recon::human::search::facing_angle_deg(
+            &up,
+            &rec.states[0].rotation,
+            &st.rotation,
+        );
         s += &format!(
-            "<tr><td>{k}</td><td>{:.3}</td><td>{:.3}</td><td>({:.2}, {:.2}, {:.2})</td><td>{:.2}</td><td><a href=\"{prefix}hypotheses/body_{k}.ply\">body_{k}.ply</a></td></tr>",
+            "<tr><td>{k}</td><td>{:.3}</td><td>{:.3}</td><td>({:.2}, {:.2}, {:.2})</td><td>{:.2}</td><td>{turned:.0}</td><td>{:.2}</td><td><a href=\"{prefix}hypotheses/body_{k}.ply\">body_{k}.ply</a></td></tr>",
             h.loss,
             h.soft_iou,
             t[0],
             t[1],
             t[2],
-            Vector3::from(t).norm()
+            Vector3::from(t).norm(),
+            h.stature_m
         );
     }
     s += "</table>";

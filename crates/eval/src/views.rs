@@ -19,22 +19,13 @@ pub fn object_mesh(obj: &FittedObject) -> Result<TriMesh, EvalError> {
     Ok(obj.mesh(64)?)
 }
 
-/// The posed body of a stage-2 state (mean adult shape), depth frame.
+/// The posed body of a stage-2 state (its fitted height), depth frame.
 pub fn posed_body(
     model: &BodyModel,
     prior: &PosePrior,
     st: &irmirror_recon::human::HumanState,
 ) -> Result<PosedBody<f64>, EvalError> {
-    let shaped = irmirror_recon::human::mean_adult(model)?;
-    let mut rotations = prior.decode(&st.latent)?;
-    rotations[0] = st.rotation;
-    Ok(model.pose(
-        &shaped,
-        &irmirror_body::Pose {
-            rotations,
-            translation: st.translation,
-        },
-    )?)
+    Ok(irmirror_recon::human::posed_body(model, prior, st)?)
 }
 
 /// Observed (green) vs fitted (magenta; white where both) reflection over the rise image,

@@ -54,6 +54,16 @@ pub enum ReconError {
         "no pixel of the reflection mask lies on a fitted object, so no reflected ray can see the person; check the object fit (stage 1) and depth_from_thermal"
     )]
     NoMaskRays,
+    /// The reflection mask covers (nearly) every object pixel: no edge to fit a person to.
+    #[error(
+        "the reflection mask covers {percent:.0} % of the object pixels (at most {max_percent:.0} % can be a person's reflection): the objects are warmer than their background frame, or the threshold is too low; check the background frames and [preprocess] threshold"
+    )]
+    MaskCoversObjects {
+        /// Object pixels (with a reflected ray) in the mask, %.
+        percent: f64,
+        /// The largest share accepted, %.
+        max_percent: f64,
+    },
     /// Every run of a fit diverged (non-finite loss or gradient): a failed result, never a
     /// silently kept last finite state.
     #[error("the {stage} diverged in all {runs} runs (non-finite loss or gradient)")]
@@ -72,6 +82,9 @@ pub enum ReconError {
     /// A learned object prior failed (its weights, or its fit diverged).
     #[error("object prior: {0}")]
     ObjectPrior(#[from] irmirror_sdf::SdfError),
+    /// A setting that cannot be used (named in the message).
+    #[error("settings: {0}")]
+    Config(String),
     /// No pixel on an object is warmer than the background by the threshold.
     #[error(
         "no reflection: no object pixel is warmer than its background by {threshold_k:.3} K (largest rise {max_rise_k:.3} K)"

@@ -227,6 +227,31 @@ pub fn reflected_rays(
     unblocked(&all_rays, &placed, objects.ground.plane.as_ref(), &trace)
 }
 
+/// Stage 2's problem: the person seen through `rays`, the objects' centre (the person faces it,
+/// roughly), the support plane's up and the floor.
+pub fn human_problem<'a>(
+    priors: BodyPriors<'a>,
+    rays: &'a ReflectedRays<f64>,
+    mask: &'a Image<bool>,
+    objects: &Objects,
+    hcfg: &HumanConfig,
+) -> HumanProblem<'a> {
+    let placed = objects.placed();
+    let centre = placed
+        .iter()
+        .fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation)
+        / placed.len().max(1) as f64;
+    HumanProblem {
+        model: priors.model,
+        prior: priors.prior,
+        rays,
+        mask,
+        up: objects.ground.n(),
+        objects_centre: centre,
+        floor: floor(objects, hcfg),
+    }
+}
+
 /// Stage 2 (reflected rays, then the person) on given stage 0–1 results: the evaluation runs
 /// the ablations of one capture from the same objects.
 pub fn reconstruct_human(
@@ -240,21 +265,8 @@ pub fn reconstruct_human(
 ) -> Result<Reconstruction, ReconError> {
     progress.stage("reflected rays", 0);
     let rays = reflected_rays(capture, &objects, &pre.mask, cfg);
-    let placed = objects.placed();
-    let centre = placed
-        .iter()
-        .fold(Vector3::zeros(), |a, o| a + o.depth_from_object.translation)
-        / placed.len().max(1) as f64;
     let hcfg = cfg.human_settings();
-    let problem = HumanProblem {
-        model: priors.model,
-        prior: priors.prior,
-        rays: &rays,
-        mask: &pre.mask,
-        up: objects.ground.n(),
-        objects_centre: centre,
-        floor: floor(&objects, &hcfg),
-    };
+    let problem = human_problem(priors, &rays, &pre.mask, &objects, &hcfg);
     progress.stage("human fit", hcfg.inits as u64);
     let (human, states) = fit_human(&problem, &hcfg, seed, &|_| progress.tick())?;
     Ok(Reconstruction {

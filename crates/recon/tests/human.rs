@@ -67,6 +67,42 @@ fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> Reflected
     irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
 }
 
+/// Stage 2's problem on a simulated capture: the person seen through `rays`, facing the first
+/// object, with `mask` and the floor given.
+fn problem_for<'a>(
+    sim: &irmirror_sim::Simulation,
+    rays: &'a ReflectedRays<f64>,
+    mask: &'a irmirror_capture::Image<bool>,
+    up: Vector3<f64>,
+    floor: Option<irmirror_recon::human::Floor>,
+) -> irmirror_recon::human::HumanProblem<'a> {
+    irmirror_recon::human::HumanProblem {
+        model: model(),
+        prior: prior(),
+        rays,
+        mask,
+        up,
+        objects_centre: sim.object_poses[0].translation,
+        floor,
+    }
+}
+
+/// The floor under the true body (its lowest vertex on it), as the pipeline finds the ground
+/// under a car.
+fn true_floor(sim: &irmirror_sim::Simulation, up: &Vector3<f64>) -> irmirror_recon::human::Floor {
+    let lowest = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| up.dot(&Vector3::from(v.map(f64::from))))
+        .fold(f64::INFINITY, f64::min);
+    irmirror_recon::human::Floor {
+        up: *up,
+        offset_m: lowest,
+    }
+}
+
 /// The true root rotation (Anny → depth) and the body's up, depth frame.
 fn true_root(
     sc: &SceneFile,
@@ -105,25 +141,23 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
     let root = sim.body.joints[0];
     let rv = &sc.person.rotvec_rad;
     let (r0, up) = true_root(&sc, &sim);
-    let problem = HumanProblem {
-        model: model(),
-        prior: prior(),
-        rays: &rays,
-        mask: &sim.reflection_mask,
-        up,
-        objects_centre: sim.object_poses[0].translation,
-        floor: None,
-    };
+    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
     let start = HumanState {
         translation: root + Vector3::new(0.2, 0.0, 0.0),
         rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(problem.up * 20f64.to_radians()))
             * r0,
+        height: HEIGHT_MEAN,
         latent: prior().encode(rv).unwrap(),
     };
     let cfg = HumanConfig::default();
     let (l0, iou0) = problem.full_loss(&start, &cfg).unwrap();
     let (end, curve) = problem
-        .run(&start, &cfg, &edge_distance(&sim.reflection_mask), 7)
+        .run(
+            &start,
+            &cfg,
+            Draw::Edge(&edge_distance(&sim.reflection_mask)),
+            7,
+        )
         .unwrap()
         .expect("no divergence");
     let (l1, iou1) = problem.full_loss(&end, &cfg).unwrap();
@@ -159,8 +193,29 @@ fn a_mask_off_the_objects_is_a_clear_error() {
     assert!(matches!(e, irmirror_recon::ReconError::NoMaskRays), "{e}");
 }
 
-/// `HumanProblem::loss_grad` (occupancy → body → root rotation exp(ω)B and pose prior, plus the
-/// latent, upright and floor priors) against central differences, f64, all rays, at ω ≠ 0.
+/// A mask that covers every object pixel is refused with its share named.
+#[test]
+fn a_mask_over_the_whole_object_is_a_clear_error() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let (_, up) = true_root(&sc, &sim);
+    let mask = irmirror_capture::Image::filled(
+        sim.reflection_mask.width,
+        sim.reflection_mask.height,
+        true,
+    );
+    let problem = problem_for(&sim, &rays, &mask, up, None);
+    let e = fit_human(&problem, &HumanConfig::default(), 0, &|_| {}).unwrap_err();
+    assert!(
+        matches!(e, irmirror_recon::ReconError::MaskCoversObjects { percent, .. } if percent > 99.9),
+        "{e}"
+    );
+    assert!(e.to_string().contains("background"), "{e}");
+}
+
+/// `HumanProblem::loss_grad` (occupancy → body → root rotation exp(ω)B, the phenotype's height
+/// through the shape basis, the pose prior, plus the latent, upright, height and floor priors)
+/// against central differences, f64, all rays, at ω ≠ 0.
 #[test]
 fn stage2_gradient_matches_finite_differences() {
     use irmirror_recon::human::*;
@@ -184,29 +239,25 @@ fn stage2_gradient_matches_finite_differences() {
         up,
         offset_m: lowest - 0.06,
     });
-    let problem = HumanProblem {
-        model: model(),
-        prior: prior(),
-        rays: &rays,
-        mask: &sim.reflection_mask,
-        up,
-        objects_centre: sim.object_poses[0].translation,
-        floor,
-    };
+    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, floor);
     let cfg = HumanConfig::default();
     let sigma = 4e-4;
     let target = problem.targets();
     let batch = Batch {
         rays: &rays,
         target: &target,
+        weight: None,
         sigma_m2: sigma,
     };
     let t = sim.body.joints[0] + Vector3::new(0.04, -0.02, 0.03);
     let omega = Vector3::new(0.05, -0.03, 0.04);
     let mut latent = prior().encode(&sc.person.rotvec_rad).unwrap();
     latent[0] += 0.3;
+    // A height slider off the mean and off the shape map's knots (its derivative is exact
+    // there), with the height prior switched on.
+    let height = HEIGHT_MEAN + 0.05;
     let mut ws = problem.scratch().unwrap();
-    let mut g = vec![0.0; 6 + latent.len()];
+    let mut g = vec![0.0; ROOT_PARAMS + latent.len()];
     let (l0, _) = problem
         .loss_grad(
             &mut ws,
@@ -214,6 +265,7 @@ fn stage2_gradient_matches_finite_differences() {
                 translation: &t,
                 omega: &omega,
                 base: &r0,
+                height,
                 latent: &latent,
             },
             &batch,
@@ -225,7 +277,7 @@ fn stage2_gradient_matches_finite_differences() {
         l0 > 0.05 && l0 < 0.99,
         "loss {l0} is not in the informative range"
     );
-    let mut f = |t: &Vector3<f64>, w: &Vector3<f64>, z: &[f64]| {
+    let mut f = |t: &Vector3<f64>, w: &Vector3<f64>, h: f64, z: &[f64]| {
         problem
             .loss_grad(
                 &mut ws,
@@ -233,6 +285,7 @@ fn stage2_gradient_matches_finite_differences() {
                     translation: t,
                     omega: w,
                     base: &r0,
+                    height: h,
                     latent: z,
                 },
                 &batch,
@@ -244,11 +297,23 @@ fn stage2_gradient_matches_finite_differences() {
     };
     let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
     let mut worst = 0.0f64;
-    for k in 0..6 + 6 {
+    for k in 0..ROOT_PARAMS + 6 {
         let h = if k < 6 { 1e-5 } else { 1e-4 };
-        let (mut tp, mut tm, mut wp, mut wm, mut zp, mut zm) =
-            (t, t, omega, omega, latent.clone(), latent.clone());
-        let idx = if k < 6 { k } else { 6 + (k - 6) * 5 };
+        let (mut tp, mut tm, mut wp, mut wm, mut hp, mut hm, mut zp, mut zm) = (
+            t,
+            t,
+            omega,
+            omega,
+            height,
+            height,
+            latent.clone(),
+            latent.clone(),
+        );
+        let idx = if k < ROOT_PARAMS {
+            k
+        } else {
+            ROOT_PARAMS + (k - ROOT_PARAMS) * 5
+        };
         match idx {
             0..3 => {
                 tp[idx] += h;
@@ -258,12 +323,16 @@ fn stage2_gradient_matches_finite_differences() {
                 wp[idx - 3] += h;
                 wm[idx - 3] -= h;
             }
+            6 => {
+                hp += h;
+                hm -= h;
+            }
             _ => {
-                zp[idx - 6] += h;
-                zm[idx - 6] -= h;
+                zp[idx - ROOT_PARAMS] += h;
+                zm[idx - ROOT_PARAMS] -= h;
             }
         }
-        let fd = (f(&tp, &wp, &zp) - f(&tm, &wm, &zm)) / (2.0 * h);
+        let fd = (f(&tp, &wp, hp, &zp) - f(&tm, &wm, hm, &zm)) / (2.0 * h);
         let diff = (fd - g[idx]).abs();
         eprintln!(
             "param {idx:2}: analytic {:+.6e}, central difference {fd:+.6e}",
@@ -271,6 +340,11 @@ fn stage2_gradient_matches_finite_differences() {
         );
         worst = worst.max(diff / gmax);
     }
+    assert!(
+        g[6].abs() > 1e-3 * gmax,
+        "the height's gradient vanishes: {}",
+        g[6]
+    );
     assert!(gmax > 1e-3, "gradient vanishes: {gmax}");
     assert!(
         worst < 2e-3,
@@ -284,7 +358,17 @@ fn representable_car_capture(
     seed: u64,
     t: ThermalPreset,
 ) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
+    representable_car_capture_with(seed, t, |_| {})
+}
+
+/// [`representable_car_capture`] with the scene edited by `edit` before simulating.
+fn representable_car_capture_with(
+    seed: u64,
+    t: ThermalPreset,
+    edit: impl Fn(&mut SceneFile),
+) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
     let mut sc = scene_with(seed, true, t);
+    edit(&mut sc);
     sc.person.phenotype = irmirror_body::Phenotype::default();
     let decoded = prior()
         .decode(&prior().encode(&sc.person.rotvec_rad).unwrap())
@@ -317,6 +401,7 @@ fn perturbed_starts(
         irmirror_recon::human::HumanState {
             translation: root + dt,
             rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0,
+            height: irmirror_recon::human::HEIGHT_MEAN,
             latent: z.to_vec(),
         }
     })
@@ -324,31 +409,35 @@ fn perturbed_starts(
 }
 
 /// Issue 8's test: on a capture with a noiseless mask and a person the model can represent
-/// (car seed 1, Boson: a 4300-pixel reflection of someone 2.5 m away; true objects), the fit
-/// from the truth stays within 5 cm, and from the truth moved 20 cm and turned 20° about the
-/// up axis (three directions) it returns within 5 cm.
+/// (car seed 1, Boson: a 4300-pixel reflection of someone 2.5 m away; true objects and the
+/// ground, which with the fitted height fixes the distance), the fit from the truth stays
+/// within 5 cm, and from the truth moved 20 cm and turned 20° about the up axis (three
+/// directions) it returns within 5 cm.
 #[test]
 fn stage2_returns_from_perturbed_starts() {
     use irmirror_recon::human::*;
     let (sc, sim, rays) = representable_car_capture(1, ThermalPreset::Boson);
     let root = sim.body.joints[0];
     let (r0, up) = true_root(&sc, &sim);
-    let problem = HumanProblem {
-        model: model(),
-        prior: prior(),
-        rays: &rays,
-        mask: &sim.reflection_mask,
+    let problem = problem_for(
+        &sim,
+        &rays,
+        &sim.reflection_mask,
         up,
-        objects_centre: sim.object_poses[0].translation,
-        floor: None,
-    };
+        Some(true_floor(&sim, &up)),
+    );
     let z = prior().encode(&sc.person.rotvec_rad).unwrap();
-    let cfg = HumanConfig::default();
+    // The body is the mean adult here, so its height is known: this test is about the return
+    // from a perturbed start (the height fit has its FD test and the search test).
+    let cfg = HumanConfig {
+        lr_height: 0.0,
+        ..HumanConfig::default()
+    };
     let edge = edge_distance(&sim.reflection_mask);
     let mut errors = Vec::new();
     for start in perturbed_starts(root, &r0, &up, &z) {
         let (end, _) = problem
-            .run(&start, &cfg, &edge, 7)
+            .run(&start, &cfg, Draw::Edge(&edge), 7)
             .unwrap()
             .expect("no divergence");
         errors.push((end.translation - root).norm());
@@ -392,19 +481,12 @@ fn perturbed_starts_report() {
         let (sc, sim, rays) = representable_car_capture(seed, ThermalPreset::Boson);
         let root = sim.body.joints[0];
         let (r0, up) = true_root(&sc, &sim);
-        let problem = HumanProblem {
-            model: model(),
-            prior: prior(),
-            rays: &rays,
-            mask: &sim.reflection_mask,
-            up,
-            objects_centre: sim.object_poses[0].translation,
-            floor: None,
-        };
+        let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
         let z = prior().encode(&sc.person.rotvec_rad).unwrap();
         let truth = HumanState {
             translation: root,
             rotation: r0,
+            height: HEIGHT_MEAN,
             latent: z.clone(),
         };
         let (lt, it) = problem.full_loss(&truth, &cfg).unwrap();
@@ -416,7 +498,10 @@ fn perturbed_starts_report() {
         let edge = edge_distance(&sim.reflection_mask);
         for (k, start) in perturbed_starts(root, &r0, &up, &z).into_iter().enumerate() {
             let t0 = std::time::Instant::now();
-            let (end, _) = problem.run(&start, &cfg, &edge, 7).unwrap().unwrap();
+            let (end, _) = problem
+                .run(&start, &cfg, Draw::Edge(&edge), 7)
+                .unwrap()
+                .unwrap();
             let (l1, i1) = problem.full_loss(&end, &cfg).unwrap();
             let d = end.translation - root;
             let along = d.dot(&(root - sim.object_poses[0].translation).normalize());
@@ -427,4 +512,128 @@ fn perturbed_starts_report() {
             );
         }
     }
+}
+
+/// The search's candidates cover the full circle of facing directions at every distance, its
+/// ranking batch is an importance-weighted stratified sample, and a front/back flip turns the
+/// facing by 180° and keeps the body upright.
+#[test]
+fn search_candidates_cover_every_facing() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let (_, up) = true_root(&sc, &sim);
+    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let cfg = HumanConfig::default();
+    let c = problem.candidates(&cfg, 3).unwrap();
+    let s = &cfg.search;
+    assert_eq!(c.len(), s.yaw_bins * s.distances * s.pose_modes.len());
+    let facing = |r: &nalgebra::Matrix3<f64>| {
+        let f = -(r * Vector3::y());
+        (f - up * up.dot(&f)).normalize()
+    };
+    // Candidates of one distance and pose mode: yaw bins `pose_modes` apart.
+    let f0 = facing(&c[0].rotation);
+    let mut angles: Vec<f64> = (0..s.yaw_bins)
+        .map(|j| {
+            let f = facing(&c[j * s.pose_modes.len()].rotation);
+            let a = f0.cross(&f).dot(&up).atan2(f0.dot(&f)).to_degrees();
+            (a + 360.0) % 360.0
+        })
+        .collect();
+    angles.sort_by(f64::total_cmp);
+    for (j, a) in angles.iter().enumerate() {
+        let want = 360.0 * j as f64 / s.yaw_bins as f64;
+        assert!((a - want).abs() < 1e-6, "bin {j}: {a}° (want {want}°)");
+    }
+    // Every candidate stands upright, and each distance is its own.
+    for st in &c {
+        assert!(((st.rotation * Vector3::z()).dot(&up) - 1.0).abs() < 1e-9);
+        assert_eq!(st.height, cfg.height_prior[0]);
+    }
+    let per = s.yaw_bins * s.pose_modes.len();
+    for k in 1..s.distances {
+        assert!((c[k * per].translation - c[(k - 1) * per].translation).norm() > 0.05);
+    }
+    // The ranking batch: every mask ray (fewer than half the batch here), the rest drawn, each
+    // stratum's weights summing to its size among all rays.
+    let (b, t, w) = problem.stratified_batch(1200, 3);
+    let all = problem.targets();
+    let (n_pos, n_neg) = (
+        all.iter().filter(|&&x| x > 0.5).count() as f64,
+        all.iter().filter(|&&x| x < 0.5).count() as f64,
+    );
+    assert!(
+        n_pos < 600.0 && b.len() == 1200,
+        "{n_pos} mask rays, batch {}",
+        b.len()
+    );
+    let sum = |pos: bool| -> f64 {
+        t.iter()
+            .zip(&w)
+            .filter(|(x, _)| (**x > 0.5) == pos)
+            .map(|(_, w)| w)
+            .sum()
+    };
+    assert!((sum(true) - n_pos).abs() < 1e-6 && (sum(false) - n_neg).abs() < 1e-6 * n_neg);
+    assert_eq!(t.iter().filter(|&&x| x > 0.5).count() as f64, n_pos);
+    let r = c[0].rotation;
+    let f = flipped(&up, &r);
+    assert!((facing(&f).dot(&facing(&r)) + 1.0).abs() < 1e-9);
+    assert!(((f * Vector3::z()).dot(&up) - 1.0).abs() < 1e-9);
+}
+
+/// Issue 25: a pedestrian facing away from the car (out of the old starts' ± 57° about facing
+/// the objects) whom the fit can represent, true objects and mask, Boson: the global search
+/// reports a hypothesis within 30° of the true facing, and the best hypothesis' root is within
+/// 25 cm of the truth.
+#[test]
+fn the_search_finds_a_person_facing_away() {
+    use irmirror_recon::human::*;
+    let away = |sc: &mut SceneFile| {
+        // Anny's front is −Y; yaw 0 faces world −Y, away from the car (at larger y).
+        sc.person.yaw_rad = 0.3;
+    };
+    let (sc, sim, rays) = representable_car_capture_with(2, ThermalPreset::Boson, away);
+    let root = sim.body.joints[0];
+    let (r0, up) = true_root(&sc, &sim);
+    let centre = sim.object_poses[0].translation;
+    let facing = |r: &nalgebra::Matrix3<f64>| {
+        let f = -(r * Vector3::y());
+        (f - up * up.dot(&f)).normalize()
+    };
+    let to_car = {
+        let d = centre - root;
+        (d - up * up.dot(&d)).normalize()
+    };
+    let away_deg = facing(&r0)
+        .dot(&to_car)
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees();
+    let mask_px = sim.reflection_mask.data.iter().filter(|&&b| b).count();
+    assert!(
+        away_deg > 120.0 && mask_px > 200,
+        "the scene should show someone facing away: {away_deg:.0}°, {mask_px} px"
+    );
+    let problem = problem_for(
+        &sim,
+        &rays,
+        &sim.reflection_mask,
+        up,
+        Some(true_floor(&sim, &up)),
+    );
+    let (fit, states) = fit_human(&problem, &HumanConfig::default(), 0, &|_| {}).unwrap();
+    let errs: Vec<(f64, f64)> = states
+        .iter()
+        .map(|s| {
+            let a = facing(&s.rotation).dot(&facing(&r0)).clamp(-1.0, 1.0);
+            ((s.translation - root).norm(), a.acos().to_degrees())
+        })
+        .collect();
+    let losses: Vec<f64> = fit.hypotheses.iter().map(|h| h.loss).collect();
+    eprintln!(
+        "facing {away_deg:.0}° from the car, {mask_px} px; hypotheses (root m, facing °): {errs:.3?}, losses {losses:.3?}"
+    );
+    assert!(errs.iter().any(|e| e.1 < 30.0), "{errs:?}");
+    assert!(errs[0].0 < 0.25, "{errs:?}");
 }

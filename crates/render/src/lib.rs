@@ -25,7 +25,7 @@ pub mod sphere_trace;
 pub use bvh::Bvh;
 pub use occupancy::{
     Aggregation, Culling, Nearest, Occupancy, OccupancyGrad, OccupancyParams, SoftRenderer,
-    soft_iou, soft_iou_loss,
+    soft_iou, soft_iou_loss, soft_iou_weighted,
 };
 pub use reflect::{Normals, ReflectedRays, reflect_camera};
 pub use sdf::{Bowl, Capsule, PlacedSdf, RoundedCylinder, Sdf, Sphere};

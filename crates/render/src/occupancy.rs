@@ -595,11 +595,24 @@ pub fn soft_iou<T: Real>(
     union_outside: T,
     d_value: &mut Vec<T>,
 ) -> (T, T) {
+    soft_iou_weighted(occupancy, target, |_| T::one(), union_outside, d_value)
+}
+
+/// [`soft_iou`] with a weight per element in both sums: `Σ w vt / (union_outside + Σ w (v + t −
+/// vt))`. With importance weights (the inverse of each element's sampling probability) it
+/// estimates the IoU over all elements from a stratified sample.
+pub fn soft_iou_weighted<T: Real>(
+    occupancy: &[T],
+    target: impl Fn(usize) -> T,
+    weight: impl Fn(usize) -> T,
+    union_outside: T,
+    d_value: &mut Vec<T>,
+) -> (T, T) {
     let (mut inter, mut union) = (T::zero(), union_outside);
     for (i, &v) in occupancy.iter().enumerate() {
-        let t = target(i);
-        inter += v * t;
-        union += v + t - v * t;
+        let (t, w) = (target(i), weight(i));
+        inter += w * v * t;
+        union += w * (v + t - v * t);
     }
     d_value.clear();
     if union <= T::zero() {
@@ -609,7 +622,7 @@ pub fn soft_iou<T: Real>(
     let u2 = union * union;
     d_value.extend((0..occupancy.len()).map(|i| {
         let t = target(i);
-        -(t * union - inter * (T::one() - t)) / u2
+        -weight(i) * (t * union - inter * (T::one() - t)) / u2
     }));
     (T::one() - inter / union, inter / union)
 }

@@ -552,3 +552,31 @@ fn degenerate_triangles_and_grazing_rays_stay_finite() {
         );
     }
 }
+
+/// The weighted soft IoU: its gradient against central differences (f64), and a weight of 2
+/// equals the element counted twice (what importance weights of a stratified sample rely on).
+#[test]
+fn weighted_soft_iou_gradient_and_duplication() {
+    use irmirror_render::soft_iou_weighted;
+    let v = [0.9, 0.2, 0.6, 0.05, 0.7];
+    let t = [1.0, 0.0, 1.0, 0.0, 0.0];
+    let w = [1.0, 3.0, 0.5, 2.0, 1.5];
+    let f = |v: &[f64]| soft_iou_weighted(v, |i| t[i], |i| w[i], 0.3, &mut Vec::new()).0;
+    let mut d = Vec::new();
+    let (l, _) = soft_iou_weighted(&v, |i| t[i], |i| w[i], 0.3, &mut d);
+    assert!(l > 0.1 && l < 0.9);
+    for k in 0..v.len() {
+        let (mut p, mut m) = (v, v);
+        p[k] += 1e-6;
+        m[k] -= 1e-6;
+        let fd = (f(&p) - f(&m)) / 2e-6;
+        assert!((fd - d[k]).abs() < 1e-8, "element {k}: {fd} vs {}", d[k]);
+    }
+    // Weight 2 on element 1 = element 1 listed twice with weight 1.
+    let v2 = [0.9f64, 0.2, 0.2, 0.6];
+    let t2 = [1.0, 0.0, 0.0, 1.0];
+    let w2 = [1.0, 2.0, 0.0, 1.0];
+    let a = soft_iou_weighted(&v2[..], |i| t2[i], |i| w2[i], 0.0, &mut Vec::new()).1;
+    let b = irmirror_render::soft_iou(&v2[..], |i| t2[i], 0.0, &mut Vec::new()).1;
+    assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+}

@@ -168,3 +168,28 @@ fn family_shapes_round_trip_and_bad_shapes_are_named() {
         .to_string();
     assert!(err.contains("an object shape"), "{err}");
 }
+
+/// The benchmark's persons wear motion-capture poses (not the pose prior's templates), drawn
+/// reproducibly: the same cell and seed give the same scene, and the pose is one of the shipped
+/// set's.
+#[test]
+fn benchmark_persons_wear_motion_capture_poses() {
+    use irmirror_sim::presets::{Cell, benchmark_scene};
+    let model = common::model();
+    let set = irmirror_body::mocap::MocapSet::builtin().unwrap();
+    for (cell, seed) in [(Cell::TabletopBowl, 5), (Cell::Car, 6)] {
+        let (a, attempt) = benchmark_scene(model, cell, seed, 50.0, 0).unwrap();
+        let (b, _) = benchmark_scene(model, cell, seed, 50.0, 0).unwrap();
+        assert_eq!(a.person.rotvec_rad, b.person.rotvec_rad);
+        let source = a
+            .person
+            .pose_name
+            .strip_prefix("mocap ")
+            .expect("a mocap pose");
+        let k = set.sources.iter().position(|s| s == source).unwrap();
+        assert_eq!(
+            a.person.rotvec_rad, set.poses[k],
+            "{cell} seed {seed} draw {attempt}"
+        );
+    }
+}

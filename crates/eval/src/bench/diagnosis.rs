@@ -3,11 +3,13 @@
 
 use super::run::Prepared;
 use crate::EvalError;
-use crate::score::facing_error_deg;
+use crate::score::{facing_error_deg, vertex_error};
 use crate::views::posed_body;
-use irmirror_recon::human::HumanProblem;
+use irmirror_recon::human::{Draw, HumanProblem, HumanState, edge_distance};
 use irmirror_recon::objects::{FittedObject, Objects};
-use irmirror_recon::pipeline::{BodyPriors, ReconConfig, Reconstruction, reflected_rays};
+use irmirror_recon::pipeline::{
+    BodyPriors, ReconConfig, Reconstruction, human_problem, reflected_rays,
+};
 use irmirror_sim::scene::ObjectShape;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -66,6 +68,23 @@ pub struct Diagnosis {
     pub hypothesis_root_errors_m: Vec<f64>,
     /// Root error of the hypothesis nearest the truth, m.
     pub nearest_root_error_m: f64,
+    /// Facing error of every reported hypothesis, degrees (`None`: keypoints degenerate).
+    #[serde(default)]
+    pub hypothesis_facing_errors_deg: Vec<Option<f64>>,
+    /// Mean per-vertex error of the best-by-loss hypothesis among those facing the right way
+    /// (within [`SUCCESS_FACING_DEG`]), m; `None` when no reported hypothesis does.
+    #[serde(default)]
+    pub right_facing_vertex_error_m: Option<f64>,
+    /// Our model refined from the truth (true root position and rotation, the true height
+    /// slider, the prior's encoding of the true pose; the full stage-2 schedule): its data term.
+    /// Lower than the fit's: the search missed a basin our model can reach (a true search
+    /// failure); not lower while the true mesh is: our model (pose prior, mean-adult
+    /// proportions) cannot represent what the true mesh explains.
+    #[serde(default)]
+    pub truth_start_loss: Option<f64>,
+    /// Root error after that refinement, m.
+    #[serde(default)]
+    pub truth_start_root_error_m: Option<f64>,
     /// The class.
     pub class: FailureClass,
 }
@@ -95,6 +114,7 @@ pub(super) fn diagnose(
     p: &Prepared,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
+    seed: u64,
 ) -> Result<Diagnosis, EvalError> {
     let BodyPriors { model, prior } = priors;
     let hcfg = ReconConfig::default().human_settings();
@@ -143,12 +163,22 @@ pub(super) fn diagnose(
         .iter()
         .map(|b| (b.joints[0] - true_root).norm())
         .collect();
-    let facing = facing_error_deg(&bodies[0].keypoints, &p.sim.body.keypoints);
+    let hypothesis_facing_errors_deg: Vec<Option<f64>> = bodies
+        .iter()
+        .map(|b| facing_error_deg(&b.keypoints, &p.sim.body.keypoints))
+        .collect();
+    let right_facing_vertex_error_m = bodies
+        .iter()
+        .zip(&hypothesis_facing_errors_deg)
+        .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
+        .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
+    let (truth_start_loss, truth_start_root_error_m) =
+        refine_from_truth(p, priors, rec, seed)?.map_or((None, None), |(l, e)| (Some(l), Some(e)));
     let class = Diagnosis::classify(
         truth_loss,
         hypothesis_losses[0],
         hypothesis_root_errors_m[0],
-        facing,
+        hypothesis_facing_errors_deg[0],
     );
     Ok(Diagnosis {
         truth_loss,
@@ -159,8 +189,41 @@ pub(super) fn diagnose(
             .fold(f64::INFINITY, f64::min),
         hypothesis_losses,
         hypothesis_root_errors_m,
+        hypothesis_facing_errors_deg,
+        right_facing_vertex_error_m,
+        truth_start_loss,
+        truth_start_root_error_m,
         class,
     })
+}
+
+/// Stage 2's refinement started at the truth (as our model can state it): its data term and
+/// root error; `None` when it diverged.
+fn refine_from_truth(
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+    seed: u64,
+) -> Result<Option<(f64, f64)>, EvalError> {
+    let hcfg = ReconConfig::default().human_settings();
+    let problem = human_problem(priors, &rec.rays, &rec.pre.mask, &rec.objects, &hcfg);
+    let person = &p.scene.person;
+    let truth = HumanState {
+        translation: p.sim.body.joints[0],
+        rotation: p.sim.body.depth_from_anny.rotation
+            * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(person.rotvec_rad[0])),
+        height: person.phenotype.height,
+        latent: priors.prior.encode(&person.rotvec_rad)?,
+    };
+    let edge = edge_distance(&rec.pre.mask);
+    let Some((end, _)) = problem.run(&truth, &hcfg, Draw::Edge(&edge), seed)? else {
+        return Ok(None);
+    };
+    let (_, iou) = problem.full_loss(&end, &hcfg)?;
+    Ok(Some((
+        1.0 - iou,
+        (end.translation - truth.translation).norm(),
+    )))
 }
 
 /// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every

@@ -78,12 +78,13 @@ pub fn run(
     for plan in &list {
         let id = &plan.id;
         progress.capture(id);
-        let p = prepare(&model, plan, &scratch)?;
         let thumbs = stage.path(&format!("captures/{id}"));
         std::fs::create_dir_all(&thumbs).map_err(|e| EvalError::Output {
             path: thumbs.clone(),
             reason: e.to_string(),
         })?;
+        let keep = selection.keep_captures.then(|| thumbs.join("capture"));
+        let p = prepare(&model, plan, &scratch, keep.as_deref())?;
         results.push(run_capture(
             &p,
             plan,
@@ -107,7 +108,7 @@ pub fn run(
     )?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS });
+    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS });
     write_text(
         &stage.path("run.toml"),
         &toml::to_string(&record).map_err(|e| ser(&e))?,
@@ -118,17 +119,28 @@ pub fn run(
 
 /// Simulates the capture, reads it back through the loader and runs stage 0, drawing again until
 /// stage 0 sees the reflection through the sensor noise: the benchmark measures reconstruction
-/// from a visible reflection.
-fn prepare(model: &BodyModel, plan: &Planned, scratch: &Path) -> Result<Prepared, EvalError> {
+/// from a visible reflection. With `keep`, the capture directory is written there (for
+/// `irmirror reconstruct`), else into `scratch` and removed.
+fn prepare(
+    model: &BodyModel,
+    plan: &Planned,
+    scratch: &Path,
+    keep: Option<&Path>,
+) -> Result<Prepared, EvalError> {
     let cfg = ReconConfig::default();
     let (seed, mut first) = (plan.seed, 0);
     loop {
         let (scene, attempt) = benchmark_scene(model, plan.cell, seed, plan.netd_mk, first)?;
         let sim = irmirror_sim::simulate(model, &scene, seed)?;
-        let dir = scratch.join(&plan.id);
+        let dir = keep.map_or_else(|| scratch.join(&plan.id), Path::to_path_buf);
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).ok();
+        }
         sim.write(model, &dir, seed)?;
         let capture = Capture::load(&dir)?;
-        std::fs::remove_dir_all(&dir).ok();
+        if keep.is_none() {
+            std::fs::remove_dir_all(&dir).ok();
+        }
         let t0 = Instant::now();
         match preprocess(&capture, &cfg.preprocess) {
             Ok(pre) => {
@@ -227,7 +239,7 @@ fn run_capture(
         let mask = fitted_mask(model, &rec.rays, &body);
         let eval = Some(evaluate(&p.sim, &body, &mask, &rec.objects)?);
         if variant == Variant::Full {
-            result.diagnosis = Some(diagnose(p, priors, &rec)?);
+            result.diagnosis = Some(diagnose(p, priors, &rec, seed)?);
             save_png(
                 &overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
                 &thumbs.join("overlay.png"),
@@ -274,6 +286,7 @@ fn random_baseline(
             let st = HumanState {
                 translation: p.sim.body.joints[0],
                 rotation: truth_root,
+                height: irmirror_recon::human::HEIGHT_MEAN,
                 latent,
             };
             let body = posed_body(model, prior, &st)?;

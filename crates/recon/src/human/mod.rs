@@ -1,0 +1,320 @@
+//! Stage 2 (paper §3.4–3.5, DESIGN.md §1): the person, from the reflection mask, with the
+//! objects fixed.
+//!
+//! Parameters per hypothesis: root translation `t` (depth frame, m), root rotation
+//! `R = exp(ω) B` (`B` the initial orientation), the body's height (Anny's phenotype `height`
+//! slider, the other phenotype values at the mean adult: [`shaped_body`]) and the pose latent `z`
+//! (32, the pose prior). Loss: `1 − soft IoU` between the soft occupancy of sampled reflected
+//! rays and the observed mask, plus `w_prior ‖z‖²`, an upright prior, a height prior and —
+//! where the floor is known (below a table, or the ground a car stands on) — the body's lowest
+//! point on it. The floor and the height together fix what the silhouette alone cannot: a
+//! taller person farther away casts the same mirror image as a shorter one nearer. Gradients:
+//! occupancy backward → vertices → body backward → rotations, shape → pose-prior VJP and the
+//! phenotype's (piecewise-linear) shape map (all analytic; see the crates' FD tests).
+//!
+//! * **Edge sampling.** Each iteration draws `rays_per_iteration` rays without replacement with
+//!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
+//!   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the iterations (curriculum).
+//!   Ablated: uniform draws of the same count.
+//! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
+//! * **Global search, then refinement** ([`search`]): candidates over the full circle of facing
+//!   directions × distances along the mask's reflected rays × pose-prior modes, scored cheaply
+//!   and halved; the survivors and their front/back flips are refined fully. The best by final
+//!   full-ray loss is kept; the `top_k` distinct ones are reported, the best one's front/back
+//!   partner among them.
+
+mod edge;
+mod problem;
+pub mod search;
+
+pub use edge::edge_distance;
+pub use problem::{Draw, Scratch};
+
+pub use search::{SearchConfig, fit_human, flipped};
+
+use crate::ReconError;
+use irmirror_body::BodyModel;
+use irmirror_body::prior::PosePrior;
+use irmirror_capture::Image;
+use irmirror_render::occupancy::Aggregation;
+use irmirror_render::reflect::ReflectedRays;
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Anny's `height` slider of the mean adult (the default phenotype, ≈ 1.69 m; male adults
+/// average ≈ 0.39, female ≈ 0.35).
+pub const HEIGHT_MEAN: f64 = 0.37;
+
+/// Stage-2 settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HumanConfig {
+    /// Hypotheses refined fully (the global search's survivors and their front/back flips).
+    pub inits: usize,
+    /// Adam steps per refined hypothesis.
+    pub iterations: usize,
+    /// Rays drawn per step, at most `max_ray_fraction` of them.
+    pub rays_per_iteration: usize,
+    /// Largest fraction of all rays drawn per step (edge sampling needs a choice to make).
+    pub max_ray_fraction: f64,
+    /// Edge sampling on/off (ablation switch).
+    pub edge_sampling: bool,
+    /// Final weight α of the edge term.
+    pub edge_mix: f64,
+    /// Edge length scale τ at the start and the end, pixels.
+    pub edge_tau_px: [f64; 2],
+    /// Occupancy σ at the start and the end, m².
+    pub sigma_m2: [f64; 2],
+    /// Learning rates: translation (m), rotation (rad), height slider, latent.
+    pub lr_translation: f64,
+    /// See `lr_translation`.
+    pub lr_rotation: f64,
+    /// See `lr_translation`; 0 keeps the height at the prior's mean (the mean adult).
+    pub lr_height: f64,
+    /// See `lr_translation`.
+    pub lr_latent: f64,
+    /// Weight of `‖z‖²`.
+    pub w_prior: f64,
+    /// Weight of the upright prior `1 − (R ẑ)·n` (people stand on the support plane's side:
+    /// Anny's up should follow the plane normal; the pose bends the body, not the root).
+    pub w_upright: f64,
+    /// Weight of the floor prior `((h_min − 0) / σ)²`, `h_min` the height of the body's lowest
+    /// vertex above the floor (people stand, sit or kneel on it); 0 switches it off.
+    pub w_floor: f64,
+    /// σ of the floor prior, metres.
+    pub floor_sigma_m: f64,
+    /// Height of a table above the floor, metres, when the support plane is a table (objects
+    /// that are not cars): the floor is this far below it (EN 527 desks: 0.72–0.76 m).
+    pub table_height_m: f64,
+    /// Prior on the height slider: mean and σ (adult stature σ ≈ 7 cm ≈ 0.06 of the slider).
+    pub height_prior: [f64; 2],
+    /// Weight of the height prior `((h − mean) / σ)²`.
+    pub w_height: f64,
+    /// Range of the initial root distances along the mean reflected ray (log-spaced), metres.
+    pub init_distance_m: [f64; 2],
+    /// The global search before refinement.
+    pub search: SearchConfig,
+    /// Distinct hypotheses reported.
+    pub top_k: usize,
+    /// How the body's triangles form a ray's occupancy (`irmirror_render::occupancy` docs).
+    pub aggregation: Aggregation,
+}
+
+impl Default for HumanConfig {
+    fn default() -> Self {
+        Self {
+            inits: 6,
+            iterations: 150,
+            rays_per_iteration: 3000,
+            max_ray_fraction: 0.5,
+            edge_sampling: true,
+            edge_mix: 0.9,
+            edge_tau_px: [6.0, 1.5],
+            sigma_m2: [3e-4, 1e-5],
+            lr_translation: 0.04,
+            lr_rotation: 0.06,
+            lr_height: 0.01,
+            lr_latent: 0.08,
+            w_prior: 2e-3,
+            w_upright: 0.05,
+            w_floor: 0.01,
+            floor_sigma_m: 0.05,
+            table_height_m: 0.75,
+            height_prior: [HEIGHT_MEAN, 0.06],
+            w_height: 2e-3,
+            init_distance_m: [0.7, 8.0],
+            search: SearchConfig::default(),
+            top_k: 3,
+            aggregation: Aggregation::Silhouette,
+        }
+    }
+}
+
+/// One fitted hypothesis.
+#[derive(Clone, Debug, Serialize)]
+pub struct Hypothesis {
+    /// Which initialisation it came from.
+    pub init: usize,
+    /// Root joint position, depth frame, metres.
+    pub translation_m: [f64; 3],
+    /// Root rotation (Anny frame → depth frame) as a rotation vector, radians.
+    pub root_rotvec_rad: [f64; 3],
+    /// Anny's phenotype height slider (see [`HEIGHT_MEAN`]).
+    pub height: f64,
+    /// Stature of the fitted body standing straight (the phenotype's rest mesh), metres.
+    pub stature_m: f64,
+    /// Pose latent.
+    pub latent: Vec<f64>,
+    /// Final loss on all rays at the final σ.
+    pub loss: f64,
+    /// Soft IoU on all rays at the final σ.
+    pub soft_iou: f64,
+    /// Loss per step (on that step's sampled rays).
+    #[serde(skip)]
+    pub loss_curve: Vec<f64>,
+}
+
+/// Stage-2 result.
+#[derive(Clone, Debug, Serialize)]
+pub struct HumanFit {
+    /// Best hypothesis first, then its front/back partner (the best turned > 135° from it,
+    /// when one was refined), then distinct others (root > 25 cm apart or facing > 45° apart)
+    /// by loss, `top_k` in all.
+    pub hypotheses: Vec<Hypothesis>,
+    /// Candidates scored by the global search.
+    pub candidates: usize,
+    /// Initialisations that diverged (non-finite loss) and were dropped.
+    pub diverged: usize,
+    /// Reflected rays (object pixels) and mask pixels among them.
+    pub rays: usize,
+    /// Mask pixels with a ray.
+    pub mask_rays: usize,
+}
+
+/// Everything a fit needs that does not change between hypotheses.
+pub struct HumanProblem<'a> {
+    /// The body model.
+    pub model: &'a BodyModel,
+    /// The pose prior.
+    pub prior: &'a PosePrior,
+    /// Reflected rays of the object pixels (depth frame).
+    pub rays: &'a ReflectedRays<f64>,
+    /// Thermal-pixel reflection mask.
+    pub mask: &'a Image<bool>,
+    /// Support-plane normal (up), depth frame.
+    pub up: Vector3<f64>,
+    /// Centre of the objects, depth frame (the person faces it, roughly).
+    pub objects_centre: Vector3<f64>,
+    /// The floor the person stands on, when known.
+    pub floor: Option<Floor>,
+}
+
+/// A horizontal floor: height of `p` above it = `up · p − offset_m`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    /// Unit up, depth frame.
+    pub up: Vector3<f64>,
+    /// `up · p` on the floor, metres.
+    pub offset_m: f64,
+}
+
+impl Floor {
+    /// Height of `p` (depth frame) above the floor, metres.
+    pub fn height(&self, p: &Vector3<f64>) -> f64 {
+        self.up.dot(p) - self.offset_m
+    }
+}
+
+/// A rotation taking Anny's +Z (up) to `up` and Anny's front (−Y) towards `facing` (projected
+/// onto the plane).
+pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> {
+    let z = up.normalize();
+    let mut f = facing - z * z.dot(facing);
+    if f.norm() < 1e-9 {
+        f = if z.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
+        f -= z * z.dot(&f);
+    }
+    let front = f.normalize();
+    // Columns: images of Anny's X, Y, Z. Anny's −Y is the front, so Y ↦ −front; X = Y × Z.
+    let y = -front;
+    let x = y.cross(&z);
+    Matrix3::from_columns(&[x, y, z])
+}
+
+/// The phenotype stage 2 fits: the mean adult (not the shape basis' origin, coefficients 0, a
+/// 1.84 m body) with the given height slider.
+pub fn phenotype(height: f64) -> irmirror_body::Phenotype {
+    irmirror_body::Phenotype {
+        height,
+        ..irmirror_body::Phenotype::default()
+    }
+}
+
+/// The rest body of a stage-2 state's height slider.
+pub fn shaped_body(
+    model: &BodyModel,
+    height: f64,
+) -> Result<irmirror_body::ShapedBody<f64>, ReconError> {
+    model
+        .shaped_phenotype::<f64>(&phenotype(height))
+        .map_err(ReconError::from)
+}
+
+/// The posed body of a stage-2 state, depth frame.
+pub fn posed_body(
+    model: &BodyModel,
+    prior: &PosePrior,
+    st: &HumanState,
+) -> Result<irmirror_body::PosedBody<f64>, ReconError> {
+    let shaped = shaped_body(model, st.height)?;
+    let mut rotations = prior.decode(&st.latent)?;
+    rotations[0] = st.rotation;
+    Ok(model.pose(
+        &shaped,
+        &irmirror_body::Pose {
+            rotations,
+            translation: st.translation,
+        },
+    )?)
+}
+
+/// Stature of a rest body (top minus bottom along Anny's up, +Z), metres.
+pub fn stature_m(shaped: &irmirror_body::ShapedBody<f64>) -> f64 {
+    let (lo, hi) = shaped
+        .vertices
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v.z), hi.max(v.z))
+        });
+    hi - lo
+}
+
+/// Where [`HumanProblem::loss_grad`] evaluates: root translation `t` (depth frame, m), root
+/// rotation `exp(ω) base` (Anny → depth; the gradient is taken in ω at the given value), height
+/// slider, pose latent. The gradient's layout is the same: `t` (3), `ω` (3), height (1), latent.
+#[derive(Clone, Copy, Debug)]
+pub struct Tangent<'a> {
+    /// Root position, depth frame, m.
+    pub translation: &'a Vector3<f64>,
+    /// Rotation vector applied on the left of `base`, rad.
+    pub omega: &'a Vector3<f64>,
+    /// Base root rotation, Anny → depth.
+    pub base: &'a Matrix3<f64>,
+    /// Height slider.
+    pub height: f64,
+    /// Pose latent.
+    pub latent: &'a [f64],
+}
+
+/// The rays a loss evaluation sees: reflected rays, their 0/1 targets, and the blur.
+#[derive(Clone, Copy, Debug)]
+pub struct Batch<'a> {
+    /// Reflected rays, depth frame.
+    pub rays: &'a ReflectedRays<f64>,
+    /// Target per ray (1: in the reflection mask).
+    pub target: &'a [f64],
+    /// Weight per ray in the soft IoU (importance weights of a stratified sample); `None`: 1.
+    pub weight: Option<&'a [f64]>,
+    /// Occupancy blur σ, m².
+    pub sigma_m2: f64,
+}
+
+/// The state of one hypothesis.
+#[derive(Clone, Debug)]
+pub struct HumanState {
+    /// Root position, depth frame, m.
+    pub translation: Vector3<f64>,
+    /// Root rotation, Anny → depth.
+    pub rotation: Matrix3<f64>,
+    /// Height slider (see [`HEIGHT_MEAN`]).
+    pub height: f64,
+    /// Pose latent.
+    pub latent: Vec<f64>,
+}
+
+/// Parameters per hypothesis before the latent: translation (3), rotation (3), height (1).
+pub const ROOT_PARAMS: usize = 7;

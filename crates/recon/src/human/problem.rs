@@ -1,0 +1,381 @@
+//! The stage-2 loss and its gradient, and one hypothesis' Adam run.
+
+use super::edge::EdgeSampler;
+use super::{
+    Batch, HumanConfig, HumanProblem, HumanState, ROOT_PARAMS, Tangent, phenotype, shaped_body,
+};
+use crate::ReconError;
+use irmirror_body::Pose;
+use irmirror_body::model::{BodyGrad, OutputGrads};
+use irmirror_capture::Image;
+use irmirror_geom::optim::{Adam, AdamParams, CosineDecay};
+use irmirror_geom::rotation::{axis_angle_to_matrix, axis_angle_to_matrix_vjp};
+use irmirror_render::occupancy::{
+    Culling, OccupancyGrad, OccupancyParams, SoftRenderer, soft_iou, soft_iou_weighted,
+};
+use irmirror_render::reflect::ReflectedRays;
+use nalgebra::Vector3;
+
+/// Step of the central difference of the phenotype's shape map in the height slider (the map is
+/// piecewise linear, so this is exact away from its knots and a subgradient on them).
+const HEIGHT_STEP: f64 = 1e-4;
+
+impl HumanProblem<'_> {
+    /// The pose of a state (36 rotations; root first).
+    pub fn pose(&self, st: &HumanState) -> Result<Pose<f64>, ReconError> {
+        let mut rotations = self.prior.decode(&st.latent)?;
+        rotations[0] = st.rotation;
+        Ok(Pose {
+            rotations,
+            translation: st.translation,
+        })
+    }
+
+    /// Buffers reused across steps (allocation-free after the first step while the height
+    /// stays; a new height reshapes the body).
+    pub fn scratch(&self) -> Result<Scratch, ReconError> {
+        let height = super::HEIGHT_MEAN;
+        let shaped = shaped_body(self.model, height)?;
+        // The BVH's topology comes from the rest body, whichever state a scratch sees first, so
+        // results do not depend on which thread evaluates which candidate (refits move boxes,
+        // never the tree).
+        let renderer = Some(SoftRenderer::new(&shaped.vertices, &self.model.asset.faces));
+        Ok(Scratch {
+            shaped,
+            height,
+            dz_dheight: self.dz_dheight(height)?,
+            posed: self.model.posed_buffers(),
+            renderer,
+            occ_grad: OccupancyGrad::default(),
+            body_grad: BodyGrad {
+                rotations: vec![],
+                translation: Vector3::zeros(),
+                shape: vec![],
+            },
+            d_value: Vec::new(),
+        })
+    }
+
+    /// `∂z/∂h`: the shape coefficients' derivative in the height slider.
+    fn dz_dheight(&self, h: f64) -> Result<Vec<f64>, ReconError> {
+        let (lo, hi) = ((h - HEIGHT_STEP).max(0.0), (h + HEIGHT_STEP).min(1.0));
+        let zp = self.model.shape_coefficients(&phenotype(hi))?;
+        let zm = self.model.shape_coefficients(&phenotype(lo))?;
+        Ok(zp
+            .iter()
+            .zip(&zm)
+            .map(|(p, m)| (p - m) / (hi - lo))
+            .collect())
+    }
+
+    /// Reshapes `ws` for height slider `h` (nothing when it already holds it).
+    fn set_height(&self, ws: &mut Scratch, h: f64) -> Result<(), ReconError> {
+        if ws.height != h {
+            let z = self.model.shape_coefficients(&phenotype(h))?;
+            irmirror_body::shape::shape_into(&self.model.asset, &z, &mut ws.shaped);
+            ws.dz_dheight = self.dz_dheight(h)?;
+            ws.height = h;
+        }
+        Ok(())
+    }
+
+    /// The stage-2 loss of the body at `at` on `batch`, and the soft IoU. With `grad` (length
+    /// [`ROOT_PARAMS`] + latent), writes `∂L/∂(t, ω, h, latent)` there.
+    pub fn loss_grad(
+        &self,
+        ws: &mut Scratch,
+        at: &Tangent<'_>,
+        batch: &Batch<'_>,
+        cfg: &HumanConfig,
+        grad: Option<&mut [f64]>,
+    ) -> Result<(f64, f64), ReconError> {
+        let Tangent {
+            translation: t,
+            omega,
+            base,
+            height,
+            latent,
+        } = *at;
+        let Batch {
+            rays,
+            target,
+            weight,
+            sigma_m2,
+        } = *batch;
+        let st = HumanState {
+            translation: *t,
+            rotation: axis_angle_to_matrix(omega) * base,
+            height,
+            latent: latent.to_vec(),
+        };
+        self.set_height(ws, height)?;
+        let pose = self.pose(&st)?;
+        self.model.pose_into(&ws.shaped, &pose, &mut ws.posed)?;
+        let r = ws
+            .renderer
+            .get_or_insert_with(|| SoftRenderer::new(&ws.posed.vertices, &self.model.asset.faces));
+        r.set_vertices(&ws.posed.vertices);
+        let params = OccupancyParams {
+            sigma_m2,
+            aggregation: cfg.aggregation,
+            ..OccupancyParams::default()
+        };
+        let occ = r.forward(rays, &params, Culling::Bvh);
+        let (l_iou, iou) = soft_iou_weighted(
+            &occ.value,
+            |i| target[i],
+            |i| weight.map_or(1.0, |w| w[i]),
+            0.0,
+            &mut ws.d_value,
+        );
+        let prior: f64 = latent.iter().map(|x| x * x).sum();
+        let up = self.up.normalize();
+        let mut loss = l_iou
+            + cfg.w_prior * prior
+            + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
+        let [h_mean, h_sigma] = cfg.height_prior;
+        let e_h = (height - h_mean) / h_sigma;
+        loss += cfg.w_height * e_h * e_h;
+        // Floor: the lowest vertex on it (its subgradient goes to that vertex alone).
+        let floor = self.floor.filter(|_| cfg.w_floor > 0.0).map(|f| {
+            let (k, h) = ws
+                .posed
+                .vertices
+                .iter()
+                .enumerate()
+                .map(|(k, v)| (k, f.height(v)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("a body has vertices");
+            let e = h / cfg.floor_sigma_m;
+            loss += cfg.w_floor * e * e;
+            (k, f.up * (2.0 * cfg.w_floor * e / cfg.floor_sigma_m))
+        });
+        let Some(g) = grad else {
+            return Ok((loss, iou));
+        };
+        r.backward(
+            rays,
+            &occ,
+            &ws.d_value,
+            &params,
+            Culling::Bvh,
+            &mut ws.occ_grad,
+        );
+        if let Some((k, d)) = floor {
+            ws.occ_grad.vertices[k] += d;
+        }
+        let bg = &mut ws.body_grad;
+        self.model.backward(
+            &ws.shaped,
+            &pose,
+            &mut ws.posed,
+            OutputGrads {
+                vertices: Some(&ws.occ_grad.vertices),
+                ..Default::default()
+            },
+            bg,
+        );
+        // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
+        bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
+        let d_omega = axis_angle_to_matrix_vjp(omega, &(bg.rotations[0] * base.transpose()));
+        let d_lat = self.prior.decode_vjp(latent, &bg.rotations)?;
+        g[..3].copy_from_slice(bg.translation.as_slice());
+        g[3..6].copy_from_slice(d_omega.as_slice());
+        g[6] = bg
+            .shape
+            .iter()
+            .zip(&ws.dz_dheight)
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            + 2.0 * cfg.w_height * e_h / h_sigma;
+        for (k, (gk, dk)) in g[ROOT_PARAMS..].iter_mut().zip(&d_lat).enumerate() {
+            *gk = dk + cfg.w_prior * 2.0 * latent[k];
+        }
+        Ok((loss, iou))
+    }
+
+    /// Targets of all rays (1 in the mask).
+    pub fn targets(&self) -> Vec<f64> {
+        self.rays
+            .pixel
+            .iter()
+            .map(|&p| f64::from(u8::from(self.mask.data[p as usize])))
+            .collect()
+    }
+
+    /// The data term of any body mesh (depth frame; e.g. the true body, which the prior need not
+    /// represent): `(1 − soft IoU, soft IoU)` on all rays at the final σ, as the hypotheses'
+    /// `soft_iou` is scored. The failure diagnosis compares it with the fit's.
+    pub fn mesh_data_loss(
+        &self,
+        vertices: &[Vector3<f64>],
+        faces: &[[u32; 3]],
+        cfg: &HumanConfig,
+    ) -> (f64, f64) {
+        let mut renderer = SoftRenderer::new(vertices, faces);
+        renderer.set_vertices(vertices);
+        let params = OccupancyParams {
+            sigma_m2: cfg.sigma_m2[1],
+            aggregation: cfg.aggregation,
+            ..OccupancyParams::default()
+        };
+        let occ = renderer.forward(self.rays, &params, Culling::Bvh);
+        let target = self.targets();
+        soft_iou(&occ.value, |i| target[i], 0.0, &mut Vec::new())
+    }
+
+    /// Loss of a state on all rays at the final σ, and its soft IoU.
+    pub fn full_loss(&self, st: &HumanState, cfg: &HumanConfig) -> Result<(f64, f64), ReconError> {
+        let batch = Batch {
+            rays: self.rays,
+            target: &self.targets(),
+            weight: None,
+            sigma_m2: cfg.sigma_m2[1],
+        };
+        self.score(&mut self.scratch()?, st, &batch, cfg)
+    }
+
+    /// Loss of a state on `batch`, and its soft IoU (no gradient).
+    pub fn score(
+        &self,
+        ws: &mut Scratch,
+        st: &HumanState,
+        batch: &Batch<'_>,
+        cfg: &HumanConfig,
+    ) -> Result<(f64, f64), ReconError> {
+        let at = Tangent {
+            translation: &st.translation,
+            omega: &Vector3::zeros(),
+            base: &st.rotation,
+            height: st.height,
+            latent: &st.latent,
+        };
+        self.loss_grad(ws, &at, batch, cfg, None)
+    }
+
+    /// Runs one hypothesis from `init` for `cfg.iterations` steps on the rays `draw` gives;
+    /// returns the final state and the per-step loss, or `None` if it diverged.
+    pub fn run(
+        &self,
+        init: &HumanState,
+        cfg: &HumanConfig,
+        draw: Draw<'_>,
+        seed: u64,
+    ) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
+        let mut ws = self.scratch()?;
+        let mut st = init.clone();
+        let base = st.rotation;
+        let mut omega = Vector3::zeros();
+        let n_lat = st.latent.len();
+        let n = ROOT_PARAMS + n_lat;
+        let mut adam = Adam::new(n, AdamParams::default());
+        let mut lr = vec![cfg.lr_translation; 3];
+        lr.extend([cfg.lr_rotation; 3]);
+        lr.push(cfg.lr_height);
+        lr.extend(vec![cfg.lr_latent; n_lat]);
+        let mut rng = irmirror_geom::rng::seeded(seed, 31);
+        let target_all = self.targets();
+        let mut sampler = match draw {
+            Draw::Edge(edge_dist) => Some(EdgeSampler::new(
+                &self
+                    .rays
+                    .pixel
+                    .iter()
+                    .map(|&p| edge_dist.data[p as usize])
+                    .collect::<Vec<f64>>(),
+            )),
+            Draw::Fixed(_) => None,
+        };
+        let (mut sub, mut target, mut idx) = (ReflectedRays::default(), Vec::new(), Vec::new());
+        let mut curve = Vec::with_capacity(cfg.iterations);
+        let (mut g, mut step) = (vec![0.0; n], vec![0.0; n]);
+        // Draw a fraction of the rays even when the budget would take them all: otherwise a
+        // small capture sees every ray each step and edge sampling changes nothing.
+        let m = cfg
+            .rays_per_iteration
+            .min((self.rays.len() as f64 * cfg.max_ray_fraction).ceil() as usize)
+            .max(1);
+        let iters = cfg.iterations.max(1);
+        for it in 0..iters {
+            let progress = it as f64 / (iters - 1).max(1) as f64;
+            let sigma = cfg.sigma_m2[0] * (cfg.sigma_m2[1] / cfg.sigma_m2[0]).powf(progress);
+            let batch = match draw {
+                Draw::Fixed(fixed) => Batch {
+                    sigma_m2: sigma,
+                    ..fixed
+                },
+                Draw::Edge(_) => {
+                    // Draw the rays (weighted sampling without replacement, `EdgeSampler`).
+                    let (alpha, tau) = if cfg.edge_sampling {
+                        (
+                            cfg.edge_mix * progress,
+                            cfg.edge_tau_px[0]
+                                + (cfg.edge_tau_px[1] - cfg.edge_tau_px[0]) * progress,
+                        )
+                    } else {
+                        (0.0, 1.0)
+                    };
+                    if let Some(sampler) = sampler.as_mut() {
+                        sampler.draw(alpha, tau, m, &mut rng, &mut idx);
+                    }
+                    self.rays.select_into(&idx, &mut sub);
+                    target.clear();
+                    target.extend(idx.iter().map(|&i| target_all[i]));
+                    Batch {
+                        rays: &sub,
+                        target: &target,
+                        weight: None,
+                        sigma_m2: sigma,
+                    }
+                }
+            };
+            let at = Tangent {
+                translation: &st.translation,
+                omega: &omega,
+                base: &base,
+                height: st.height,
+                latent: &st.latent,
+            };
+            let (loss, _) = self.loss_grad(&mut ws, &at, &batch, cfg, Some(&mut g))?;
+            if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
+                return Ok(None);
+            }
+            curve.push(loss);
+            adam.step(&g, &lr, 1.0, &mut step);
+            // Learning rates decay by cosine to 10 %.
+            let decay = CosineDecay { floor: 0.1 }.at(progress);
+            st.translation -= Vector3::new(step[0], step[1], step[2]) * decay;
+            omega -= Vector3::new(step[3], step[4], step[5]) * decay;
+            // The slider is a phenotype value: kept in [0, 1].
+            st.height = (st.height - step[6] * decay).clamp(0.0, 1.0);
+            for k in 0..n_lat {
+                st.latent[k] -= step[ROOT_PARAMS + k] * decay;
+            }
+        }
+        st.rotation = axis_angle_to_matrix(&omega) * base;
+        Ok(Some((st, curve)))
+    }
+}
+
+/// Where [`HumanProblem::run`] takes each step's rays from.
+#[derive(Clone, Copy, Debug)]
+pub enum Draw<'a> {
+    /// Drawn afresh each step by edge sampling (or uniformly, when `cfg.edge_sampling` is off),
+    /// given each pixel's distance to the mask's edge ([`super::edge_distance`]).
+    Edge(&'a Image<f64>),
+    /// The same (weighted) batch every step; its σ is replaced by the schedule's.
+    Fixed(Batch<'a>),
+}
+
+/// Buffers of [`HumanProblem::loss_grad`], reused across steps.
+pub struct Scratch {
+    shaped: irmirror_body::ShapedBody<f64>,
+    /// The height slider `shaped` was made for.
+    height: f64,
+    dz_dheight: Vec<f64>,
+    posed: irmirror_body::PosedBody<f64>,
+    renderer: Option<SoftRenderer<f64>>,
+    occ_grad: OccupancyGrad<f64>,
+    body_grad: BodyGrad<f64>,
+    d_value: Vec<f64>,
+}

@@ -1,0 +1,487 @@
+//! Stage 2's global search, then refinement.
+//!
+//! A mirror image pins the person's direction from the objects well, but not their distance
+//! along the reflected rays, their facing (a silhouette seen in a mirror barely tells front
+//! from back) or their size. So the fit does not start from one guess:
+//!
+//! 1. **Candidates** on a grid: `yaw_bins` facing directions over the full circle (relative to
+//!    facing the objects) × `distances` root distances log-spaced over `init_distance_m` along
+//!    the mask's mean reflected ray (the feet on the floor when it is known) × `pose_modes`
+//!    (stand, walk, sit: templates of the pose set, encoded by the prior; the prior's mean,
+//!    latent 0, is a half-crouch that fits nobody's silhouette). Default 8 × 12 × 3 = 288.
+//! 2. **Screening, then successive halving.** All candidates are scored as they stand (one
+//!    forward pass at the blur `screen_sigma_m2`); the best `keep_scored` go on. Each round
+//!    runs them for a few Adam steps (the blur annealed over `round_sigma_m2`),
+//!    ranks them and keeps the better half; the rounds double the steps so each costs about the
+//!    same. Cheap steps are enough to fall into a basin, not to finish it. Screening, steps and
+//!    ranking all use one fixed batch of `score_rays` rays: every mask ray (up to half) and a
+//!    uniform sample of the others, importance-weighted ([`HumanProblem::stratified_batch`]).
+//! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
+//!    (root > 25 cm or facing > 45° apart, as reported hypotheses), and the front/back flip of
+//!    each (turned 180° about the up axis through the root): both run the full schedule (edge
+//!    sampling, σ annealed to `sigma_m2[1]`), and are ranked on all rays.
+
+use super::problem::{Draw, Scratch};
+use super::{
+    Batch, HumanConfig, HumanFit, HumanProblem, HumanState, Hypothesis, edge_distance, shaped_body,
+    stature_m, upright_facing,
+};
+use crate::ReconError;
+use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle};
+use irmirror_render::reflect::ReflectedRays;
+use nalgebra::{Matrix3, Vector3};
+use rand::Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The largest share of the object pixels a person's reflection can cover: beyond it the mask
+/// has no edge left to fit (every pixel a target, any body large enough scores IoU 1).
+pub const MAX_MASK_SHARE: f64 = 0.95;
+
+/// The global search's schedule (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SearchConfig {
+    /// Facing directions over the full circle.
+    pub yaw_bins: usize,
+    /// Root distances along the mask's mean reflected ray.
+    pub distances: usize,
+    /// Pose modes: activity templates of the pose set (`irmirror_body::prior::generator`),
+    /// encoded by the prior. People near a car stand or walk; at a table they may sit.
+    pub pose_modes: Vec<String>,
+    /// Candidates kept after scoring the grid as it stands (no steps).
+    pub keep_scored: usize,
+    /// Halving rounds.
+    pub rounds: usize,
+    /// Adam steps of the first round (doubled each round).
+    pub first_steps: usize,
+    /// Rays of the fixed, stratified batch the rounds step on and rank with.
+    pub score_rays: usize,
+    /// The blur of the screening pass, m² (the occupancy's cost grows with it: every triangle
+    /// within ≈ 3σ of a ray is visited).
+    pub screen_sigma_m2: f64,
+    /// The blur the rounds anneal from and to (and rank at the second), m².
+    pub round_sigma_m2: [f64; 2],
+    /// Refine each survivor's front/back flip too.
+    pub flips: bool,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        Self {
+            yaw_bins: 8,
+            distances: 12,
+            pose_modes: ["stand", "walk", "sit"].map(String::from).to_vec(),
+            keep_scored: 16,
+            rounds: 2,
+            first_steps: 8,
+            score_rays: 1200,
+            screen_sigma_m2: 1e-4,
+            round_sigma_m2: [3e-4, 3e-5],
+            flips: true,
+        }
+    }
+}
+
+/// A rotation of `r` by 180° about `up` (the root stays): the front/back flip.
+pub fn flipped(up: &Vector3<f64>, r: &Matrix3<f64>) -> Matrix3<f64> {
+    axis_angle_to_matrix(&(up.normalize() * std::f64::consts::PI)) * r
+}
+
+/// Two states far enough apart to report both: root > 25 cm apart or facing > 45° apart.
+fn distinct(a: &HumanState, b: &HumanState) -> bool {
+    let far = (a.translation - b.translation).norm() > 0.25;
+    let turned =
+        (a.rotation.transpose() * b.rotation).trace() < 1.0 + 2.0 * 45f64.to_radians().cos();
+    far || turned
+}
+
+/// Angle between two root rotations' facing (Anny's −Y) about `up`, degrees.
+pub fn facing_angle_deg(up: &Vector3<f64>, a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
+    let flat = |r: &Matrix3<f64>| {
+        let f = -(r * Vector3::y());
+        (f - up * up.dot(&f)).try_normalize(1e-9)
+    };
+    match (flat(a), flat(b)) {
+        (Some(x), Some(y)) => x.dot(&y).clamp(-1.0, 1.0).acos().to_degrees(),
+        _ => 0.0,
+    }
+}
+
+impl HumanProblem<'_> {
+    /// A fixed batch of about `n` rays that estimates the soft IoU over all rays: every mask ray
+    /// (at most half the batch) and uniformly drawn others, each stratum weighted by its
+    /// inverse sampling rate. A uniform draw would see a few dozen mask rays on a car door
+    /// (a 2,500-pixel reflection among 150,000 object pixels), too few to rank candidates.
+    pub fn stratified_batch(
+        &self,
+        n: usize,
+        seed: u64,
+    ) -> (ReflectedRays<f64>, Vec<f64>, Vec<f64>) {
+        let target_all = self.targets();
+        let (pos, neg): (Vec<usize>, Vec<usize>) =
+            (0..self.rays.len()).partition(|&i| target_all[i] > 0.5);
+        let mut rng = irmirror_geom::rng::seeded(seed, 41);
+        let n_pos = pos.len().min(n.div_ceil(2));
+        let n_neg = neg.len().min(n.saturating_sub(n_pos).max(1));
+        let mut pick = |from: &[usize], k: usize| -> Vec<usize> {
+            rand::seq::index::sample(&mut rng, from.len(), k)
+                .into_iter()
+                .map(|i| from[i])
+                .collect()
+        };
+        let mut chosen: Vec<(usize, f64)> = Vec::with_capacity(n_pos + n_neg);
+        let w_pos = pos.len() as f64 / n_pos.max(1) as f64;
+        let w_neg = neg.len() as f64 / n_neg.max(1) as f64;
+        chosen.extend(pick(&pos, n_pos).into_iter().map(|i| (i, w_pos)));
+        chosen.extend(pick(&neg, n_neg).into_iter().map(|i| (i, w_neg)));
+        chosen.sort_unstable_by_key(|c| c.0);
+        let idx: Vec<usize> = chosen.iter().map(|c| c.0).collect();
+        let mut rays = ReflectedRays::default();
+        self.rays.select_into(&idx, &mut rays);
+        let target = idx.iter().map(|&i| target_all[i]).collect();
+        (rays, target, chosen.iter().map(|c| c.1).collect())
+    }
+
+    /// The search's candidates (deterministic for `seed`; module docs).
+    pub fn candidates(&self, cfg: &HumanConfig, seed: u64) -> Result<Vec<HumanState>, ReconError> {
+        let mask_rays: Vec<usize> = (0..self.rays.len())
+            .filter(|&i| self.mask.data[self.rays.pixel[i] as usize])
+            .collect();
+        if mask_rays.is_empty() {
+            return Err(ReconError::NoMaskRays);
+        }
+        let share = mask_rays.len() as f64 / self.rays.len() as f64;
+        if share > MAX_MASK_SHARE {
+            return Err(ReconError::MaskCoversObjects {
+                percent: 100.0 * share,
+                max_percent: 100.0 * MAX_MASK_SHARE,
+            });
+        }
+        let o = mask_rays
+            .iter()
+            .fold(Vector3::zeros(), |a, &i| a + self.rays.origin[i])
+            / mask_rays.len() as f64;
+        let d = mask_rays
+            .iter()
+            .fold(Vector3::zeros(), |a, &i| a + self.rays.dir[i])
+            .try_normalize(1e-12)
+            .ok_or(ReconError::NoMaskRays)?;
+        let s = &cfg.search;
+        let height = cfg.height_prior[0];
+        let up = self.up.normalize();
+        let mut rng = irmirror_geom::rng::seeded(seed, 21);
+        let generator = irmirror_body::prior::generator::PoseGenerator::new(self.model);
+        // Each mode's latent and its root's height above its lowest vertex standing upright
+        // (Anny's own frame is Z up: the identity root stands upright).
+        let modes: Vec<(Vec<f64>, f64)> = s
+            .pose_modes
+            .iter()
+            .map(|name| {
+                let rotvecs = generator.template(name, &mut rng).ok_or_else(|| {
+                    ReconError::Config(format!(
+                        "unknown pose mode {name:?} in [human.search] pose_modes (one of {})",
+                        irmirror_body::prior::generator::TEMPLATES.join(", ")
+                    ))
+                })?;
+                let latent = self.prior.encode(&rotvecs)?;
+                let st = HumanState {
+                    translation: Vector3::zeros(),
+                    rotation: Matrix3::identity(),
+                    height,
+                    latent,
+                };
+                let body = super::posed_body(self.model, self.prior, &st)?;
+                let lowest = body
+                    .vertices
+                    .iter()
+                    .map(|v| v.z)
+                    .fold(f64::INFINITY, f64::min);
+                Ok((st.latent, -lowest))
+            })
+            .collect::<Result<_, ReconError>>()?;
+        if modes.is_empty() {
+            return Err(ReconError::Config(
+                "[human.search] pose_modes is empty".to_string(),
+            ));
+        }
+        let [near, far] = cfg.init_distance_m;
+        let (nd, ny) = (s.distances.max(1), s.yaw_bins.max(1));
+        let mut out = Vec::with_capacity(nd * ny * modes.len());
+        for k in 0..nd {
+            // Log-spaced: the mirror image of someone 1 m away and of someone 8 m away differ
+            // by as much as those at 4 and 8 m.
+            let frac = (k as f64 + rng.random_range(0.3..0.7)) / nd as f64;
+            let dist = near * (far / near.max(1e-3)).powf(frac);
+            let on_ray = o + d * dist;
+            let base = upright_facing(&up, &(self.objects_centre - on_ray));
+            for j in 0..ny {
+                let yaw = std::f64::consts::TAU * j as f64 / ny as f64;
+                let rotation = axis_angle_to_matrix(&(up * yaw)) * base;
+                for (latent, root_height) in &modes {
+                    // With a floor, stand there: the ray passes through the body's column.
+                    let translation = match self.floor {
+                        Some(f) => on_ray + f.up * (root_height - f.height(&on_ray)),
+                        None => on_ray,
+                    };
+                    out.push(HumanState {
+                        translation,
+                        rotation,
+                        height,
+                        latent: latent.clone(),
+                    });
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Successive halving over `candidates` (module docs): the survivors, best first.
+    fn halve(
+        &self,
+        candidates: Vec<HumanState>,
+        cfg: &HumanConfig,
+        seed: u64,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        let s = &cfg.search;
+        let (rays, target, weight) = self.stratified_batch(s.score_rays, seed);
+        let batch = Batch {
+            rays: &rays,
+            target: &target,
+            weight: Some(&weight),
+            sigma_m2: s.round_sigma_m2[1],
+        };
+        let t0 = std::time::Instant::now();
+        // The grid as it stands, at the starting blur: position along the rays and facing
+        // decide most of the overlap, so a forward pass sorts out most candidates.
+        let coarse = Batch {
+            sigma_m2: s.screen_sigma_m2,
+            ..batch
+        };
+        let mut scored: Vec<(f64, HumanState)> = candidates
+            .into_par_iter()
+            .map_init(
+                || None::<Scratch>,
+                |ws, st| {
+                    let ws = match ws {
+                        Some(ws) => ws,
+                        None => ws.insert(self.scratch()?),
+                    };
+                    let (loss, _) = self.score(ws, &st, &coarse, cfg)?;
+                    Ok((loss, st))
+                },
+            )
+            .collect::<Result<Vec<_>, ReconError>>()?;
+        scored.retain(|(l, _)| l.is_finite());
+        tracing::debug!("screening: {:.2} s", t0.elapsed().as_secs_f64());
+        scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut candidates: Vec<HumanState> = scored
+            .into_iter()
+            .take(s.keep_scored.max(1))
+            .map(|(_, st)| st)
+            .collect();
+        for round in 0..s.rounds {
+            let round_cfg = HumanConfig {
+                iterations: s.first_steps << round,
+                sigma_m2: s.round_sigma_m2,
+                ..cfg.clone()
+            };
+            let mut scored: Vec<(f64, HumanState)> = candidates
+                .par_iter()
+                .enumerate()
+                .map_init(
+                    || None::<Scratch>,
+                    |ws, (k, st)| {
+                        let run_seed = seed
+                            .wrapping_mul(7919)
+                            .wrapping_add((round * 10_000 + k) as u64);
+                        let Some((end, _)) =
+                            self.run(st, &round_cfg, Draw::Fixed(batch), run_seed)?
+                        else {
+                            return Ok(None);
+                        };
+                        let ws = match ws {
+                            Some(ws) => ws,
+                            None => ws.insert(self.scratch()?),
+                        };
+                        let (loss, _) = self.score(ws, &end, &batch, cfg)?;
+                        Ok(loss.is_finite().then_some((loss, end)))
+                    },
+                )
+                .collect::<Result<Vec<_>, ReconError>>()?
+                .into_iter()
+                .flatten()
+                .collect();
+            scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+            if let Some((best, st)) = scored.first() {
+                tracing::debug!(
+                    "search round {round} ({:.2} s): {} candidates, best loss {best:.3} at {:.2} m from the objects, turned {:.0}° from facing them",
+                    t0.elapsed().as_secs_f64(),
+                    scored.len(),
+                    (st.translation - self.objects_centre).norm(),
+                    facing_angle_deg(
+                        &self.up,
+                        &st.rotation,
+                        &upright_facing(&self.up, &(self.objects_centre - st.translation))
+                    )
+                );
+            }
+            let keep = if round + 1 == s.rounds {
+                scored.len()
+            } else {
+                scored.len().div_ceil(2)
+            };
+            candidates = scored.into_iter().take(keep).map(|(_, st)| st).collect();
+        }
+        Ok(candidates)
+    }
+
+    /// The hypotheses refined fully: the best distinct survivors of the search and, with
+    /// `flips`, the front/back flip of each (`inits` in all).
+    pub fn initial_states(
+        &self,
+        cfg: &HumanConfig,
+        seed: u64,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        let t0 = std::time::Instant::now();
+        let ranked = self.halve(self.candidates(cfg, seed)?, cfg, seed)?;
+        tracing::debug!("global search: {:.2} s", t0.elapsed().as_secs_f64());
+        let flips = cfg.search.flips;
+        let want = if flips {
+            cfg.inits.div_ceil(2)
+        } else {
+            cfg.inits
+        }
+        .max(1);
+        let mut chosen: Vec<usize> = Vec::with_capacity(want);
+        for (i, st) in ranked.iter().enumerate() {
+            if chosen.len() < want && chosen.iter().all(|&k| distinct(&ranked[k], st)) {
+                chosen.push(i);
+            }
+        }
+        // Too few distinct basins: fill with the next best.
+        for i in 0..ranked.len() {
+            if chosen.len() < want && !chosen.contains(&i) {
+                chosen.push(i);
+            }
+        }
+        let survivors = chosen.into_iter().map(|i| ranked[i].clone());
+        let mut out = Vec::with_capacity(cfg.inits);
+        for st in survivors {
+            if flips && out.len() + 1 < cfg.inits.max(2) {
+                let f = HumanState {
+                    rotation: flipped(&self.up, &st.rotation),
+                    ..st.clone()
+                };
+                out.push(st);
+                out.push(f);
+            } else {
+                out.push(st);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Fits the person: global search, every survivor refined in parallel, best first, its
+/// front/back partner next, distinct top-k.
+pub fn fit_human(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    seed: u64,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
+    let s = &cfg.search;
+    let candidates = s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len();
+    let inits = problem.initial_states(cfg, seed)?;
+    let t0 = std::time::Instant::now();
+    let edge_dist = edge_distance(problem.mask);
+    type Run = Option<(usize, HumanState, Vec<f64>)>;
+    let results: Vec<Result<Run, ReconError>> = inits
+        .par_iter()
+        .enumerate()
+        .map(|(k, init)| {
+            let r = problem.run(
+                init,
+                cfg,
+                Draw::Edge(&edge_dist),
+                seed.wrapping_mul(1000).wrapping_add(k as u64),
+            )?;
+            progress(k);
+            Ok(r.map(|(s, c)| (k, s, c)))
+        })
+        .collect();
+    tracing::debug!("refinement: {:.2} s", t0.elapsed().as_secs_f64());
+    let mut done = Vec::new();
+    let mut diverged = 0;
+    for r in results {
+        match r? {
+            Some(x) => done.push(x),
+            None => diverged += 1,
+        }
+    }
+    if done.is_empty() {
+        return Err(ReconError::Diverged {
+            stage: "human fit",
+            runs: diverged,
+        });
+    }
+    let mut scored: Vec<(Hypothesis, HumanState)> = done
+        .into_par_iter()
+        .map(|(k, st, curve)| {
+            let (loss, iou) = problem.full_loss(&st, cfg)?;
+            let h = Hypothesis {
+                init: k,
+                translation_m: st.translation.into(),
+                root_rotvec_rad: matrix_to_axis_angle(&st.rotation).into(),
+                height: st.height,
+                stature_m: stature_m(&shaped_body(problem.model, st.height)?),
+                latent: st.latent.clone(),
+                loss,
+                soft_iou: iou,
+                loss_curve: curve,
+            };
+            Ok((h, st))
+        })
+        .collect::<Result<_, ReconError>>()?;
+    scored.sort_by(|a, b| a.0.loss.total_cmp(&b.0.loss));
+    tracing::debug!("refinement + scoring: {:.2} s", t0.elapsed().as_secs_f64());
+    let top_k = cfg.top_k.max(1);
+    let mut kept: Vec<(Hypothesis, HumanState)> = Vec::new();
+    let mut rest = scored.into_iter();
+    if let Some(best) = rest.next() {
+        kept.push(best);
+    }
+    let mut rest: Vec<_> = rest.collect();
+    // The best one's front/back partner: what a binary silhouette cannot rule out.
+    let up = problem.up.normalize();
+    if top_k > 1
+        && let Some(i) = rest
+            .iter()
+            .position(|(_, s)| facing_angle_deg(&up, &s.rotation, &kept[0].1.rotation) > 135.0)
+    {
+        kept.push(rest.remove(i));
+    }
+    for (h, s) in rest {
+        if kept.len() < top_k && kept.iter().all(|(_, k)| distinct(k, &s)) {
+            kept.push((h, s));
+        }
+    }
+    let mask_rays = problem
+        .rays
+        .pixel
+        .iter()
+        .filter(|&&p| problem.mask.data[p as usize])
+        .count();
+    let (hyps, states): (Vec<Hypothesis>, Vec<HumanState>) = kept.into_iter().unzip();
+    Ok((
+        HumanFit {
+            hypotheses: hyps,
+            candidates,
+            diverged,
+            rays: problem.rays.len(),
+            mask_rays,
+        },
+        states,
+    ))
+}
