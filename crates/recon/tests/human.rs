@@ -597,19 +597,7 @@ fn the_search_finds_a_person_facing_away() {
     let root = sim.body.joints[0];
     let (r0, up) = true_root(&sc, &sim);
     let centre = sim.object_poses[0].translation;
-    let facing = |r: &nalgebra::Matrix3<f64>| {
-        let f = -(r * Vector3::y());
-        (f - up * up.dot(&f)).normalize()
-    };
-    let to_car = {
-        let d = centre - root;
-        (d - up * up.dot(&d)).normalize()
-    };
-    let away_deg = facing(&r0)
-        .dot(&to_car)
-        .clamp(-1.0, 1.0)
-        .acos()
-        .to_degrees();
+    let away_deg = search::facing_angle_deg(&up, &r0, &upright_facing(&up, &(centre - root)));
     let mask_px = sim.reflection_mask.data.iter().filter(|&&b| b).count();
     assert!(
         away_deg > 120.0 && mask_px > 200,
@@ -626,8 +614,8 @@ fn the_search_finds_a_person_facing_away() {
     let errs: Vec<(f64, f64)> = states
         .iter()
         .map(|s| {
-            let a = facing(&s.rotation).dot(&facing(&r0)).clamp(-1.0, 1.0);
-            ((s.translation - root).norm(), a.acos().to_degrees())
+            let turned = search::facing_angle_deg(&up, &s.rotation, &r0);
+            ((s.translation - root).norm(), turned)
         })
         .collect();
     let losses: Vec<f64> = fit.hypotheses.iter().map(|h| h.loss).collect();
