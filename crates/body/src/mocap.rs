@@ -15,7 +15,7 @@
 
 use crate::{BodyError, BodyModel, ShapedBody};
 use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// One rotation channel's axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -281,23 +281,20 @@ fn heading_frame(
     Some(Matrix3::from_columns(&[x, up.cross(&x), *up]))
 }
 
-/// The smallest rotation taking unit `a` to unit `b`.
+/// The smallest rotation taking unit `a` to unit `b` (nalgebra's; for opposite vectors, which
+/// it leaves undefined, half a turn about an axis normal to `a`).
 fn swing(a: &Vector3<f64>, b: &Vector3<f64>) -> Matrix3<f64> {
-    let axis = a.cross(b);
-    let (s, c) = (axis.norm(), a.dot(b).clamp(-1.0, 1.0));
-    if s < 1e-12 {
-        if c > 0.0 {
-            return Matrix3::identity();
-        }
-        // Opposite: half a turn about any axis normal to `a`.
-        let n = if a.x.abs() < 0.9 {
-            Vector3::x()
-        } else {
-            Vector3::y()
-        };
-        return axis_angle_to_matrix(&(a.cross(&n).normalize() * std::f64::consts::PI));
-    }
-    axis_angle_to_matrix(&(axis / s * s.atan2(c)))
+    Rotation3::rotation_between(a, b).map_or_else(
+        || {
+            let n = if a.x.abs() < 0.9 {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            };
+            axis_angle_to_matrix(&(a.cross(&n).normalize() * std::f64::consts::PI))
+        },
+        Rotation3::into_inner,
+    )
 }
 
 /// A retargeting of one BVH skeleton to a body model.

@@ -170,6 +170,21 @@ fn bad_inputs_fail_cleanly() {
     assert!(stderr(&o).contains("bad.safetensors"), "{}", stderr(&o));
     assert!(!tmp("s").exists(), "a failed run left an output directory");
     std::fs::remove_file(bad).ok();
+    // Motion capture: a missing file, and a file that is not BVH, are named; nothing written.
+    let not_bvh = tmp("notes.bvh");
+    std::fs::write(&not_bvh, "just some text\n").unwrap();
+    let out = tmp("poses.safetensors");
+    for (file, expect) in [
+        ("/nonexistent.bvh", "/nonexistent.bvh"),
+        (not_bvh.to_str().unwrap(), "notes.bvh: not a BVH file"),
+    ] {
+        let o = irmirror(&["body", "retarget-bvh", file, "--out", out.to_str().unwrap()]);
+        assert!(!o.status.success(), "{file} succeeded");
+        let e = stderr(&o);
+        assert!(e.contains(expect) && !e.contains("panicked"), "{e}");
+        assert!(!out.exists() && !out.with_extension("png").exists());
+    }
+    std::fs::remove_file(not_bvh).ok();
 }
 
 #[test]

@@ -3,8 +3,6 @@
 
 use crate::EvalError;
 use image::{Rgb, RgbImage};
-use irmirror_body::prior::PosePrior;
-use irmirror_body::{BodyModel, PosedBody};
 use irmirror_capture::Image;
 use irmirror_geom::{PinholeCamera, Rigid3, TriMesh};
 use irmirror_recon::objects::FittedObject;
@@ -17,15 +15,6 @@ use nalgebra::Vector3;
 /// A fitted object's surface as a mesh in the depth frame (marching tetrahedra, 64³).
 pub fn object_mesh(obj: &FittedObject) -> Result<TriMesh, EvalError> {
     Ok(obj.mesh(64)?)
-}
-
-/// The posed body of a stage-2 state (its fitted height), depth frame.
-pub fn posed_body(
-    model: &BodyModel,
-    prior: &PosePrior,
-    st: &irmirror_recon::human::HumanState,
-) -> Result<PosedBody<f64>, EvalError> {
-    Ok(irmirror_recon::human::posed_body(model, prior, st)?)
 }
 
 /// Observed (green) vs fitted (magenta; white where both) reflection over the rise image,

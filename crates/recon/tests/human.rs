@@ -576,6 +576,16 @@ fn search_candidates_cover_every_facing() {
     };
     assert!((sum(true) - n_pos).abs() < 1e-6 && (sum(false) - n_neg).abs() < 1e-6 * n_neg);
     assert_eq!(t.iter().filter(|&&x| x > 0.5).count() as f64, n_pos);
+    // An unknown pose mode is a settings error that names it and the valid ones.
+    let mut bad = cfg.clone();
+    bad.search.pose_modes = vec!["stand".into(), "moonwalk".into()];
+    let e = problem.candidates(&bad, 3).unwrap_err();
+    assert!(
+        matches!(e, irmirror_recon::ReconError::Config(_))
+            && e.to_string().contains("\"moonwalk\"")
+            && e.to_string().contains("squat"),
+        "{e}"
+    );
     let r = c[0].rotation;
     let f = flipped(&up, &r);
     assert!((facing(&f).dot(&facing(&r)) + 1.0).abs() < 1e-9);

@@ -4,8 +4,7 @@
 use super::run::Prepared;
 use crate::EvalError;
 use crate::score::{facing_error_deg, vertex_error};
-use crate::views::posed_body;
-use irmirror_recon::human::{Draw, HumanProblem, HumanState, edge_distance};
+use irmirror_recon::human::{Draw, HumanProblem, HumanState, edge_distance, posed_body};
 use irmirror_recon::objects::{FittedObject, Objects};
 use irmirror_recon::pipeline::{
     BodyPriors, ReconConfig, Reconstruction, human_problem, reflected_rays,

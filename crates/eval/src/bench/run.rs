@@ -10,11 +10,12 @@ use super::{
 use crate::EvalError;
 use crate::output::{Staging, save_png, write_text};
 use crate::score::{Evaluation, evaluate, fitted_mask, third_view};
-use crate::views::{object_mesh, overlay, posed_body};
+use crate::views::{object_mesh, overlay};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::Capture;
 use irmirror_recon::human::HumanState;
+use irmirror_recon::human::posed_body;
 use irmirror_recon::objects::{Objects, reconstruct_objects};
 use irmirror_recon::pipeline::{BodyPriors, ReconConfig, reconstruct_human};
 use irmirror_recon::{Preprocessed, ReconError, preprocess};

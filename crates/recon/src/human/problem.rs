@@ -274,15 +274,18 @@ impl HumanProblem<'_> {
         lr.push(cfg.lr_height);
         lr.extend(vec![cfg.lr_latent; n_lat]);
         let mut rng = irmirror_geom::rng::seeded(seed, 31);
-        let target_all = self.targets();
-        let mut sampler = match draw {
-            Draw::Edge(edge_dist) => Some(EdgeSampler::new(
-                &self
-                    .rays
-                    .pixel
-                    .iter()
-                    .map(|&p| edge_dist.data[p as usize])
-                    .collect::<Vec<f64>>(),
+        // Edge draws: the sampler and every ray's target (a fixed batch brings its own).
+        let mut edge = match draw {
+            Draw::Edge(edge_dist) => Some((
+                EdgeSampler::new(
+                    &self
+                        .rays
+                        .pixel
+                        .iter()
+                        .map(|&p| edge_dist.data[p as usize])
+                        .collect::<Vec<f64>>(),
+                ),
+                self.targets(),
             )),
             Draw::Fixed(_) => None,
         };
@@ -315,12 +318,12 @@ impl HumanProblem<'_> {
                     } else {
                         (0.0, 1.0)
                     };
-                    if let Some(sampler) = sampler.as_mut() {
+                    if let Some((sampler, target_all)) = edge.as_mut() {
                         sampler.draw(alpha, tau, m, &mut rng, &mut idx);
+                        target.clear();
+                        target.extend(idx.iter().map(|&i| target_all[i]));
                     }
                     self.rays.select_into(&idx, &mut sub);
-                    target.clear();
-                    target.extend(idx.iter().map(|&i| target_all[i]));
                     Batch {
                         rays: &sub,
                         target: &target,
