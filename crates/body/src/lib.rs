@@ -26,10 +26,12 @@ pub mod mocap;
 pub mod model;
 pub mod phenotype;
 pub mod prior;
+pub mod regions;
 pub mod shape;
 
 pub use asset::BodyAsset;
 pub use error::BodyError;
 pub use model::{BodyGrad, BodyModel, OutputGrads, Pose, PosedBody};
 pub use phenotype::Phenotype;
+pub use regions::Region;
 pub use shape::ShapedBody;

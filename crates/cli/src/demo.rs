@@ -56,7 +56,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     )
     .context("reconstructing the simulated capture")?;
     bars.stage("writing results", 0);
-    let written = crate::result::write(&stage, "", &capture, &rec, &model, &prior)?;
+    let written = crate::result::write(&stage, "", &capture, &rec, &model, &prior, &cfg)?;
     for ext in ["ply", "obj", "glb"] {
         sim.body
             .mesh
@@ -175,7 +175,7 @@ vertex. <code>irmirror eval</code> measures them over many captures per regime (
 <tr><th>reflection size</th><td>{px} thermal pixels</td></tr>
 <tr><th>reflection contrast</th><td>{c:.2} K maximum, {m:.2} K mean rise over the background frame (noise-free)</td></tr>
 <tr><th>object pixels</th><td>{op}</td></tr>
-<tr><th>person</th><td>pose template `{pose}`, skin {skin:.0} °C, clothing {cloth:.0} °C</td></tr>
+<tr><th>person</th><td>pose template `{pose}`; surface temperatures: face {face:.1} °C, hair {hair:.1} °C, other bare skin {skin:.1} °C, clothing {cloth:.1} °C</td></tr>
 </table>
 <h2>Files</h2><ul>
 <li><a href="capture/capture.toml">capture/</a> — the capture in irmirror's format, with truth/ and preview/</li>
@@ -215,6 +215,8 @@ vertex. <code>irmirror eval</code> measures them over many captures per regime (
         pose = p.pose_name,
         skin = p.skin_c,
         cloth = p.clothing_c,
+        face = p.region_temperature(irmirror_body::Region::Face).0,
+        hair = p.region_temperature(irmirror_body::Region::Hair).0,
         scene = scene.replace('<', "&lt;"),
     )
 }

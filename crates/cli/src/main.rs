@@ -151,6 +151,15 @@ enum Command {
         /// Only the full model (no ablation columns).
         #[arg(long)]
         full_only: bool,
+        /// Only these variants (comma-separated), where the set runs them; e.g.
+        /// `--variants full,no-radiometric` compares the thermal fit with the paper's mask on
+        /// every capture without the other ablations.
+        #[arg(long, value_enum, value_delimiter = ',')]
+        variants: Vec<irmirror_eval::bench::Variant>,
+        /// Settings every variant starts from (TOML; any subset of the fields of run.toml's
+        /// `config`, as `reconstruct --config`): tune on `--preset dev`, then measure on quick.
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Keep every simulated capture (captures/<id>/capture, with its truth/) for
         /// `irmirror reconstruct`.
         #[arg(long)]
@@ -291,18 +300,24 @@ fn main() -> std::process::ExitCode {
             limit,
             cell,
             full_only,
+            variants,
+            config,
             keep_captures,
-        } => eval_cmd::run(
-            preset,
-            &out,
-            &irmirror_eval::bench::Selection {
-                limit: limit.map(|l| l as usize),
-                cell,
-                full_only,
-                keep_captures,
-            },
-            progress,
-        ),
+        } => reconstruct_cmd::load_config(config.as_deref(), &[]).and_then(|config| {
+            eval_cmd::run(
+                preset,
+                &out,
+                &irmirror_eval::bench::Selection {
+                    limit: limit.map(|l| l as usize),
+                    cell,
+                    full_only,
+                    variants,
+                    config,
+                    keep_captures,
+                },
+                progress,
+            )
+        }),
         Command::TrainSdf {
             category,
             meshes,

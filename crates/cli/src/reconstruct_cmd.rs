@@ -34,6 +34,8 @@ pub enum AblateArg {
     SphereTracing,
     /// Raw SDF normals instead of the 3×3 average.
     Smoothing,
+    /// Fit the binary reflection mask (the paper's data term) instead of the thermal rise.
+    Radiometric,
 }
 
 impl From<AblateArg> for Ablation {
@@ -42,6 +44,7 @@ impl From<AblateArg> for Ablation {
             AblateArg::EdgeSampling => Ablation::EdgeSampling,
             AblateArg::SphereTracing => Ablation::SphereTracing,
             AblateArg::Smoothing => Ablation::Smoothing,
+            AblateArg::Radiometric => Ablation::Radiometric,
         }
     }
 }
@@ -214,7 +217,7 @@ pub fn run(
             .with_context(ctx)?;
             bars.finish();
             let st = Staging::new(out, "run.toml")?;
-            crate::result::write(&st, "", &capture, &rec, &model, &prior)?;
+            crate::result::write(&st, "", &capture, &rec, &model, &prior, &cfg)?;
             let html = format!(
                 "{}<h1>irmirror reconstruction</h1><p>Capture: <code>{}</code>; seed {seed}; irmirror {}.</p>{}</body></html>",
                 html_head("irmirror reconstruction"),

@@ -81,6 +81,7 @@ pub fn write(
     rec: &Reconstruction,
     model: &BodyModel,
     prior: &PosePrior,
+    cfg: &irmirror_recon::pipeline::ReconConfig,
 ) -> Result<Written> {
     let p = |name: &str| stage.path(&format!("{prefix}{name}"));
     for d in ["debug", "objects", "hypotheses", "views"] {
@@ -131,6 +132,14 @@ pub fn write(
         &overlay(&pre.rise_k, &pre.mask, &fitted_mask),
         &p("overlay.png"),
     )?;
+    // The radiometric fit: observed, fitted and residual rise around the reflection.
+    let priors = irmirror_recon::pipeline::BodyPriors { model, prior };
+    if let Some(fitted) = irmirror_recon::pipeline::predicted_rise(rec, priors, cfg)? {
+        save_png(
+            &irmirror_eval::views::rise_panels(&pre.rise_k, &fitted, &pre.mask),
+            &p("rise_fit.png"),
+        )?;
+    }
     let curves: Vec<&[f64]> = rec
         .human
         .hypotheses
@@ -184,7 +193,8 @@ pub fn write(
         "objects": rec.objects.objects,
         "human": {
             "note": "The reflection constrains the person only partly: several placements can explain a small reflection. hypotheses[0] is the best by loss; the others are distinct (root > 25 cm apart or facing > 45° apart) and nearly as good when their losses are close.",
-            "shape": "mean adult (shape coefficients 0)",
+            "shape": "the mean adult's phenotype with the fitted height slider (hypotheses[].height, stature_m)",
+            "data_term": rec.human.data_term,
             "hypotheses": rec.human.hypotheses,
             "rotvec_rad": decoded,
             "bone_names": model.asset.meta.bone_names,
@@ -238,6 +248,17 @@ pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> 
 <figure><img src="{prefix}loss_curve.png" width="480"><figcaption>loss per step: best hypothesis (blue), others (grey)</figcaption></figure>
 "#
     );
+    if rec.human.data_term == "radiometric" {
+        s += &format!(
+            r#"<figure><img src="{prefix}rise_fit.png" width="720"><figcaption>thermal rise around the reflection, best hypothesis: observed | fitted | residual (observed − fitted: red warmer, blue cooler than the fit; ± half the observed peak)</figcaption></figure>
+"#
+        );
+    } else {
+        s += &format!(
+            "<p>Stage 2 fitted the binary reflection mask: {}.</p>",
+            rec.human.data_term
+        );
+    }
     for (name, _, _) in &capture.extra_cameras {
         s += &format!(
             r#"<figure><img src="{prefix}views/{name}.png" width="480"><figcaption>fit seen from the capture's camera “{name}”</figcaption></figure>"#

@@ -35,6 +35,94 @@ pub fn overlay(rise_k: &Image<f64>, observed: &Image<bool>, fitted: &[bool]) -> 
     })
 }
 
+/// Observed rise, fitted rise and their residual side by side, cropped to the reflection (the
+/// mask's largest connected piece, 3 pixels around) and enlarged
+/// by nearest neighbour to ≈ 240 pixels high. Rises share one grey scale (0 to the observed
+/// peak); the residual (observed − fitted) is blue (negative) – white – red (positive) over
+/// ± half the peak. Separated by 4-pixel black bars.
+pub fn rise_panels(observed: &Image<f64>, fitted: &Image<f64>, mask: &Image<bool>) -> RgbImage {
+    let (w, h) = (observed.width, observed.height);
+    let peak = observed
+        .data
+        .iter()
+        .zip(&mask.data)
+        .filter(|(_, m)| **m)
+        .map(|(r, _)| *r)
+        .fold(1e-9, f64::max);
+    // The bounding box of the mask's largest 8-connected piece (the person; a rim's streak is
+    // another piece).
+    let mut seen = vec![false; (w * h) as usize];
+    let mut best: Option<(usize, [u32; 4])> = None;
+    for start in 0..w * h {
+        if !mask.data[start as usize] || seen[start as usize] {
+            continue;
+        }
+        let (mut stack, mut n, mut b) = (vec![start], 0, [w, h, 0, 0]);
+        seen[start as usize] = true;
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i % w, i / w);
+            n += 1;
+            b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+            for (dx, dy) in [
+                (-1, -1),
+                (0, -1),
+                (1, -1),
+                (-1, 0),
+                (1, 0),
+                (-1, 1),
+                (0, 1),
+                (1, 1),
+            ] {
+                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                    continue;
+                }
+                let j = (ny as u32 * w + nx as u32) as usize;
+                if mask.data[j] && !seen[j] {
+                    seen[j] = true;
+                    stack.push(j as u32);
+                }
+            }
+        }
+        if best.is_none_or(|(m, _)| n > m) {
+            best = Some((n, b));
+        }
+    }
+    let [x0, y0, x1, y1] = best.map_or([0, 0, w - 1, h - 1], |(_, b)| b);
+    let pad = 3;
+    let (x0, y0) = (x0.saturating_sub(pad), y0.saturating_sub(pad));
+    let (x1, y1) = ((x1 + pad).min(w - 1), (y1 + pad).min(h - 1));
+    let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
+    let k = (240 / ch).clamp(1, 24).min((400 / cw).max(1));
+    let gap = 4;
+    let pw = cw * k;
+    RgbImage::from_fn(3 * pw + 2 * gap, ch * k, |x, y| {
+        let panel = x / (pw + gap);
+        let xin = x % (pw + gap);
+        if xin >= pw {
+            return Rgb([0, 0, 0]);
+        }
+        let i = ((y0 + y / k) * w + x0 + xin / k) as usize;
+        let grey = |v: f64| {
+            let g = (v.max(0.0) / peak * 255.0).min(255.0) as u8;
+            Rgb([g, g, g])
+        };
+        match panel {
+            0 => grey(observed.data[i]),
+            1 => grey(fitted.data[i]),
+            _ => {
+                let r = ((observed.data[i] - fitted.data[i]) / (0.5 * peak)).clamp(-1.0, 1.0);
+                let f = |t: f64| (255.0 * (1.0 - t.abs())) as u8;
+                if r >= 0.0 {
+                    Rgb([255, f(r), f(r)])
+                } else {
+                    Rgb([f(r), f(r), 255])
+                }
+            }
+        }
+    })
+}
+
 /// A body mesh to draw, depth frame.
 pub struct Drawn<'a> {
     /// Vertices.

@@ -1,6 +1,7 @@
 //! The whole pipeline on one capture: stage 0 → stage 1 → reflected rays → stage 2.
 
 use crate::ReconError;
+use crate::human::radiometric::Radiometry;
 use crate::human::{Floor, HumanConfig, HumanFit, HumanProblem, HumanState, fit_human};
 use crate::objects::{Objects, Stage1Config, reconstruct_objects};
 use crate::preprocess::{PreprocessConfig, Preprocessed, preprocess};
@@ -12,7 +13,8 @@ use irmirror_render::sphere_trace::{SurfaceMethod, TraceParams};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-/// The ablation switches of the paper's Table 1: each changes one step only.
+/// The ablation switches of the paper's Table 1, and ours (`Radiometric`): each changes one
+/// step only.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Ablation {
@@ -22,6 +24,8 @@ pub enum Ablation {
     SphereTracing,
     /// Raw SDF normals instead of the 3×3 average.
     Smoothing,
+    /// The binary mask's soft IoU (the paper's data term) instead of the thermal rise.
+    Radiometric,
 }
 
 /// All settings of `reconstruct` (the `--config` TOML; every field optional).
@@ -59,6 +63,9 @@ impl ReconConfig {
         let mut h = self.human.clone();
         if self.ablate.contains(&Ablation::EdgeSampling) {
             h.edge_sampling = false;
+        }
+        if self.ablate.contains(&Ablation::Radiometric) {
+            h.radiometric.enabled = false;
         }
         h
     }
@@ -235,6 +242,7 @@ pub fn human_problem<'a>(
     mask: &'a Image<bool>,
     objects: &Objects,
     hcfg: &HumanConfig,
+    radiometry: Option<&'a Radiometry>,
 ) -> HumanProblem<'a> {
     let placed = objects.placed();
     let centre = placed
@@ -249,7 +257,63 @@ pub fn human_problem<'a>(
         up: objects.ground.n(),
         objects_centre: centre,
         floor: floor(objects, hcfg),
+        radiometry,
     }
+}
+
+/// The radiometric observations stage 2 fits, and the data term in words for the record:
+/// `None` when the term is ablated or the capture cannot give it (no background frames: the
+/// room's temperature is unknown), which is logged and recorded, never silent.
+pub fn radiometry(
+    pre: &Preprocessed,
+    rays: &ReflectedRays<f64>,
+    model: &irmirror_body::BodyModel,
+    hcfg: &HumanConfig,
+) -> Result<(Option<Radiometry>, String), ReconError> {
+    if !hcfg.radiometric.enabled {
+        return Ok((None, "mask".into()));
+    }
+    match Radiometry::new(pre, rays, model) {
+        Ok(r) => Ok((Some(r), "radiometric".into())),
+        Err(ReconError::Config(why)) => {
+            tracing::warn!("stage 2 fits the binary mask: {why}");
+            Ok((None, format!("mask (fallback: {why})")))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// The thermal rise (K) the radiometric model predicts for the best hypothesis, per thermal
+/// pixel (0 off the rays), for the report; `None` when stage 2 fitted the mask.
+pub fn predicted_rise(
+    rec: &Reconstruction,
+    priors: BodyPriors<'_>,
+    cfg: &ReconConfig,
+) -> Result<Option<Image<f64>>, ReconError> {
+    let hcfg = cfg.human_settings();
+    let (Some(st), (Some(rad), _)) = (
+        rec.states.first(),
+        radiometry(&rec.pre, &rec.rays, priors.model, &hcfg)?,
+    ) else {
+        return Ok(None);
+    };
+    let problem = human_problem(
+        priors,
+        &rec.rays,
+        &rec.pre.mask,
+        &rec.objects,
+        &hcfg,
+        Some(&rad),
+    );
+    let Some(per_ray) = problem.predicted_rise(st, &hcfg)? else {
+        return Ok(None);
+    };
+    let (w, h) = (rec.pre.rise_k.width, rec.pre.rise_k.height);
+    let mut img = Image::filled(w, h, 0.0);
+    for (p, y) in rec.rays.pixel.iter().zip(per_ray) {
+        img.data[*p as usize] = y;
+    }
+    Ok(Some(img))
 }
 
 /// Stage 2 (reflected rays, then the person) on given stage 0–1 results: the evaluation runs
@@ -266,9 +330,11 @@ pub fn reconstruct_human(
     progress.stage("reflected rays", 0);
     let rays = reflected_rays(capture, &objects, &pre.mask, cfg);
     let hcfg = cfg.human_settings();
-    let problem = human_problem(priors, &rays, &pre.mask, &objects, &hcfg);
+    let (rad, data_term) = radiometry(&pre, &rays, priors.model, &hcfg)?;
+    let problem = human_problem(priors, &rays, &pre.mask, &objects, &hcfg, rad.as_ref());
     progress.stage("human fit", hcfg.inits as u64);
-    let (human, states) = fit_human(&problem, &hcfg, seed, &|_| progress.tick())?;
+    let (mut human, states) = fit_human(&problem, &hcfg, seed, &|_| progress.tick())?;
+    human.data_term = data_term;
     Ok(Reconstruction {
         pre,
         objects,

@@ -66,6 +66,9 @@ pub struct Preprocessed {
     pub threshold_k: f64,
     /// Robust noise estimate of the rise on object pixels, K.
     pub noise_k: f64,
+    /// Median apparent temperature of the background frames on object pixels, K (what a mirror
+    /// shows of the room where the person is not); `None` without background frames.
+    pub background_k: Option<f64>,
 }
 
 /// Median of a copy of `v` (0 for empty input).
@@ -204,6 +207,16 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         return Err(ReconError::NoObjectPixels);
     }
     let max_rise = on.iter().copied().fold(f64::MIN, f64::max);
+    let background_k = (!capture.thermal_background_k.is_empty()).then(|| {
+        let mut b: Vec<f64> = background
+            .data
+            .iter()
+            .zip(&objects.data)
+            .filter(|(_, o)| **o)
+            .map(|(b, _)| *b)
+            .collect();
+        median(&mut b)
+    });
     // Robust noise: MAD of the rises (the reflection is a small minority of object pixels).
     let med = median(&mut on.clone());
     let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
@@ -252,6 +265,7 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         edges,
         threshold_k,
         noise_k: noise,
+        background_k,
     })
 }
 

@@ -216,7 +216,24 @@ fn draw_scene(
         }
     };
     family_shapes(&mut scene, shapes, seed, attempt);
+    draw_temperatures(&mut scene.person, seed, attempt);
     scene
+}
+
+/// Draws the person's face, skin, hair and clothing temperatures uniformly in the cited ranges
+/// of `irmirror_body::regions::THERMAL` (own random stream: the rest of the scene does not
+/// depend on it).
+fn draw_temperatures(person: &mut crate::scene::Person, seed: u64, attempt: u64) {
+    let mut rng = irmirror_geom::rng::seeded(seed, 5000 + attempt);
+    let mut draw = |r: irmirror_body::Region| {
+        let [lo, hi] = r.thermal().temp_c;
+        rng.random_range(lo..=hi)
+    };
+    use irmirror_body::Region::{Clothing, Face, Hair, Skin};
+    person.clothing_c = draw(Clothing);
+    person.skin_c = draw(Skin);
+    person.face_c = Some(draw(Face));
+    person.hair_c = Some(draw(Hair));
 }
 
 /// With [`Shapes::Family`], replaces each simple shape by a family member of about its size.

@@ -5,7 +5,7 @@
 //! before rendering.
 
 use crate::shapes::Shape;
-use irmirror_body::Phenotype;
+use irmirror_body::{Phenotype, Region};
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_geom::transform::RigidFile;
 use irmirror_geom::{PinholeCamera, Rigid3};
@@ -198,6 +198,29 @@ pub struct Person {
     pub skin_c: f64,
     /// Clothing surface temperature, °C (≈ 28–31).
     pub clothing_c: f64,
+    /// Face temperature, °C; absent: `skin_c` (scene files written before the face had its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face_c: Option<f64>,
+    /// Surface temperature of the hair on the scalp, °C; absent: the scalp is bare skin at
+    /// `skin_c` (scene files written before hair was modelled).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hair_c: Option<f64>,
+}
+
+impl Person {
+    /// Temperature (°C) and emissivity of a body region (`irmirror_body::regions`).
+    pub fn region_temperature(&self, region: Region) -> (f64, f64) {
+        let skin = Region::Skin.thermal().emissivity;
+        match region {
+            Region::Clothing => (self.clothing_c, region.thermal().emissivity),
+            Region::Skin => (self.skin_c, skin),
+            Region::Face => (self.face_c.unwrap_or(self.skin_c), skin),
+            Region::Hair => match self.hair_c {
+                Some(t) => (t, region.thermal().emissivity),
+                None => (self.skin_c, skin),
+            },
+        }
+    }
 }
 
 /// A heat source (black body sphere).
@@ -410,6 +433,8 @@ fn person_facing_table(
         yaw_rad: rng.random_range(-0.4..0.4),
         skin_c: 34.0,
         clothing_c: 30.0,
+        face_c: None,
+        hair_c: None,
     };
     let third = look_at(
         Vector3::new(position[0] + 2.5, position[1] - 1.5, 1.4),
@@ -561,6 +586,8 @@ pub fn car(
         yaw_rad: rng.random_range(-3.1..3.1),
         skin_c: 34.0,
         clothing_c: 28.0,
+        face_c: None,
+        hair_c: None,
     };
     let third = look_at(
         Vector3::new(position[0] + side * 3.0, position[1] - 2.0, 1.6),

@@ -3,6 +3,7 @@
 
 use crate::SimError;
 use crate::scene::{SceneFile, yaw};
+use irmirror_body::regions::{Region, triangle_regions, vertex_regions};
 use irmirror_body::{BodyModel, Pose};
 use irmirror_capture::planck::{ZERO_C_K, band_radiance};
 use irmirror_geom::rotation::axis_angle_to_matrix;
@@ -18,10 +19,10 @@ use nalgebra::Vector3;
 pub enum Surface {
     /// Reflecting object k.
     Object(usize),
-    /// The person (skin if true, else clothing).
+    /// The person.
     Person {
-        /// Exposed skin.
-        skin: bool,
+        /// The surface region hit.
+        region: Region,
     },
     /// The table top.
     Table,
@@ -73,40 +74,20 @@ pub struct World {
     pub body: TriMesh,
     body_vertices: Vec<Vector3<f64>>,
     body_bvh: Bvh<f64>,
-    /// Per body triangle: exposed skin?
-    body_skin: Vec<bool>,
+    /// Per body triangle: its region.
+    body_region: Vec<Region>,
     table: Option<TableTop>,
     heat: Vec<(Vector3<f64>, f64, f64)>,
     /// Room radiance.
     pub ambient: f64,
-    skin: (f64, f64),
-    clothing: (f64, f64),
+    /// Per region ([`Region::ALL`] order): emissivity and band radiance of its temperature.
+    person: [(f64, f64); 4],
     trace_params: TraceParams,
 }
 
 /// Reflected rays start this far (m) off the surface along the normal, beyond the sphere
 /// tracer's tolerance, so they do not hit the surface they leave.
 pub const SURFACE_OFFSET_M: f64 = 1e-4;
-
-/// Skin emissivity (DESIGN.md §6).
-const SKIN_EMISSIVITY: f64 = 0.98;
-/// Clothing (cotton) emissivity.
-const CLOTHING_EMISSIVITY: f64 = 0.95;
-/// Bones whose dominant triangles are exposed skin.
-const SKIN_BONES: [&str; 12] = [
-    "head",
-    "neck01",
-    "neck02",
-    "neck03",
-    "wrist.L",
-    "wrist.R",
-    "lowerarm01.L",
-    "lowerarm02.L",
-    "lowerarm01.R",
-    "lowerarm02.R",
-    "foot.L",
-    "foot.R",
-];
 
 /// The posed body of a scene in the world frame, with per-vertex dominant bone.
 pub struct PlacedBody {
@@ -209,7 +190,7 @@ impl World {
                 emitted: band_radiance(o.temp_c + ZERO_C_K),
             });
         }
-        let (body_mesh, body_vertices, body_bvh, body_skin) = match body {
+        let (body_mesh, body_vertices, body_bvh, body_region) = match body {
             Some(b) => {
                 let v: Vec<Vector3<f64>> = b
                     .mesh
@@ -218,26 +199,8 @@ impl World {
                     .map(|p| Vector3::from(p.map(f64::from)))
                     .collect();
                 let bvh = Bvh::build(&v, &b.mesh.triangles);
-                let skin_bones: Vec<usize> = SKIN_BONES
-                    .iter()
-                    .filter_map(|n| model.joint_index(n))
-                    .collect();
-                let k = model.asset.influences;
-                let dominant: Vec<usize> = (0..model.n_vertices())
-                    .map(|i| model.asset.skin_indices[i * k] as usize)
-                    .collect();
-                let skin = b
-                    .mesh
-                    .triangles
-                    .iter()
-                    .map(|t| {
-                        t.iter()
-                            .filter(|&&v| skin_bones.contains(&dominant[v as usize]))
-                            .count()
-                            >= 2
-                    })
-                    .collect();
-                (b.mesh.clone(), v, bvh, skin)
+                let regions = triangle_regions(&vertex_regions(model)?, &b.mesh.triangles);
+                (b.mesh.clone(), v, bvh, regions)
             }
             None => (TriMesh::default(), vec![], Bvh::build(&[], &[]), vec![]),
         };
@@ -256,7 +219,7 @@ impl World {
             body: body_mesh,
             body_vertices,
             body_bvh,
-            body_skin,
+            body_region,
             table,
             heat: scene
                 .heat_sources
@@ -270,8 +233,10 @@ impl World {
                 })
                 .collect(),
             ambient: band_radiance(scene.ambient_c + ZERO_C_K),
-            skin: (SKIN_EMISSIVITY, band_radiance(p.skin_c + ZERO_C_K)),
-            clothing: (CLOTHING_EMISSIVITY, band_radiance(p.clothing_c + ZERO_C_K)),
+            person: Region::ALL.map(|r| {
+                let (temp_c, emissivity) = p.region_temperature(r);
+                (emissivity, band_radiance(temp_c + ZERO_C_K))
+            }),
             trace_params: TraceParams {
                 coarse_tol_rel: 1e-5,
                 method: SurfaceMethod::SphereTrace { steps: 3 },
@@ -315,7 +280,7 @@ impl World {
             consider(Hit {
                 t_m: t,
                 surface: Surface::Person {
-                    skin: self.body_skin[tri as usize],
+                    region: self.body_region[tri as usize],
                 },
                 point: ray.at(t),
                 normal: n,
@@ -386,7 +351,7 @@ impl World {
                 };
                 r.emissivity * r.emitted + (1.0 - r.emissivity) * reflected
             }
-            Surface::Person { skin } => grey(if skin { self.skin } else { self.clothing }),
+            Surface::Person { region } => grey(self.person[region.index()]),
             Surface::Table => {
                 let t = self.table.expect("hit implies a table");
                 grey((t.emissivity, t.emitted))

@@ -7,7 +7,7 @@ use crate::score::{facing_error_deg, vertex_error};
 use irmirror_recon::human::{Draw, HumanProblem, HumanState, edge_distance, posed_body};
 use irmirror_recon::objects::{FittedObject, Objects};
 use irmirror_recon::pipeline::{
-    BodyPriors, ReconConfig, Reconstruction, human_problem, reflected_rays,
+    BodyPriors, ReconConfig, Reconstruction, human_problem, radiometry, reflected_rays,
 };
 use irmirror_sim::scene::ObjectShape;
 use nalgebra::Vector3;
@@ -50,8 +50,9 @@ pub const SUCCESS_ROOT_M: f64 = 0.15;
 /// …and this facing angle is a success.
 pub const SUCCESS_FACING_DEG: f64 = 30.0;
 
-/// The full model's fit against the true body, both scored by stage 2's data term
-/// (`1 − soft IoU` on all rays at the final σ) through the *fitted* objects.
+/// The full model's fit against the true body, both scored by stage 2's data term (the
+/// radiometric term, or `1 − soft IoU` when that is off; all rays at the final σ) through the
+/// *fitted* objects.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Diagnosis {
     /// The true body mesh's data term.
@@ -84,6 +85,14 @@ pub struct Diagnosis {
     /// Root error after that refinement, m.
     #[serde(default)]
     pub truth_start_root_error_m: Option<f64>,
+    /// The true body turned 180° about the up axis through its root, scored by the data term:
+    /// not above `truth_loss` means the capture cannot tell the truth from its front/back flip.
+    #[serde(default)]
+    pub truth_flip_loss: Option<f64>,
+    /// The true body and its flip scored by the paper's mask term (`1 − soft IoU`): what a binary
+    /// silhouette says about front and back on the same capture.
+    #[serde(default)]
+    pub truth_mask_losses: Option<[f64; 2]>,
     /// The class.
     pub class: FailureClass,
 }
@@ -113,10 +122,11 @@ pub(super) fn diagnose(
     p: &Prepared,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
-    seed: u64,
+    (seed, cfg): (u64, &ReconConfig),
 ) -> Result<Diagnosis, EvalError> {
     let BodyPriors { model, prior } = priors;
-    let hcfg = ReconConfig::default().human_settings();
+    let hcfg = cfg.human_settings();
+    let (rad, _) = radiometry(&rec.pre, &rec.rays, model, &hcfg)?;
     let problem = HumanProblem {
         model,
         prior,
@@ -125,6 +135,7 @@ pub(super) fn diagnose(
         up: rec.objects.ground.n(),
         objects_centre: Vector3::zeros(),
         floor: None,
+        radiometry: rad.as_ref(),
     };
     let truth: Vec<Vector3<f64>> = p
         .sim
@@ -134,24 +145,33 @@ pub(super) fn diagnose(
         .iter()
         .map(|v| Vector3::from(v.map(f64::from)))
         .collect();
-    let (truth_loss, _) = problem.mesh_data_loss(&truth, &model.asset.faces, &hcfg);
-    let truth_loss_true_objects = true_objects(p, &rec.objects).map(|objects| {
-        let cfg = ReconConfig::default();
-        let rays = reflected_rays(&p.capture, &objects, &rec.pre.mask, &cfg);
-        let through_truth = HumanProblem {
-            rays: &rays,
-            ..problem
-        };
-        through_truth
-            .mesh_data_loss(&truth, &model.asset.faces, &hcfg)
-            .0
-    });
-    let hypothesis_losses: Vec<f64> = rec
-        .human
-        .hypotheses
-        .iter()
-        .map(|h| 1.0 - h.soft_iou)
-        .collect();
+    let (truth_loss, _) = problem.mesh_data_loss(&truth, &hcfg);
+    // The truth turned around (180° about its up axis through the root).
+    let root = p.sim.body.joints[0];
+    let up = p.sim.body.depth_from_anny.rotation * Vector3::z();
+    let turn = irmirror_geom::rotation::axis_angle_to_matrix(&(up * std::f64::consts::PI));
+    let flipped: Vec<Vector3<f64>> = truth.iter().map(|v| root + turn * (v - root)).collect();
+    let truth_flip_loss = Some(problem.mesh_data_loss(&flipped, &hcfg).0);
+    let mut mask_cfg = hcfg.clone();
+    mask_cfg.radiometric.enabled = false;
+    let truth_mask_losses = Some([
+        problem.mesh_data_loss(&truth, &mask_cfg).0,
+        problem.mesh_data_loss(&flipped, &mask_cfg).0,
+    ]);
+    let truth_loss_true_objects = match true_objects(p, &rec.objects) {
+        Some(objects) => {
+            let rays = reflected_rays(&p.capture, &objects, &rec.pre.mask, cfg);
+            let (rad, _) = radiometry(&rec.pre, &rays, model, &hcfg)?;
+            let through_truth = HumanProblem {
+                rays: &rays,
+                radiometry: rad.as_ref(),
+                ..problem
+            };
+            Some(through_truth.mesh_data_loss(&truth, &hcfg).0)
+        }
+        None => None,
+    };
+    let hypothesis_losses: Vec<f64> = rec.human.hypotheses.iter().map(|h| h.data_loss).collect();
     let true_root = p.sim.body.joints[0];
     let bodies = rec
         .states
@@ -172,7 +192,8 @@ pub(super) fn diagnose(
         .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
         .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
     let (truth_start_loss, truth_start_root_error_m) =
-        refine_from_truth(p, priors, rec, seed)?.map_or((None, None), |(l, e)| (Some(l), Some(e)));
+        refine_from_truth(p, priors, rec, (seed, cfg))?
+            .map_or((None, None), |(l, e)| (Some(l), Some(e)));
     let class = Diagnosis::classify(
         truth_loss,
         hypothesis_losses[0],
@@ -192,6 +213,8 @@ pub(super) fn diagnose(
         right_facing_vertex_error_m,
         truth_start_loss,
         truth_start_root_error_m,
+        truth_flip_loss,
+        truth_mask_losses,
         class,
     })
 }
@@ -202,10 +225,18 @@ fn refine_from_truth(
     p: &Prepared,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
-    seed: u64,
+    (seed, cfg): (u64, &ReconConfig),
 ) -> Result<Option<(f64, f64)>, EvalError> {
-    let hcfg = ReconConfig::default().human_settings();
-    let problem = human_problem(priors, &rec.rays, &rec.pre.mask, &rec.objects, &hcfg);
+    let hcfg = cfg.human_settings();
+    let (rad, _) = radiometry(&rec.pre, &rec.rays, priors.model, &hcfg)?;
+    let problem = human_problem(
+        priors,
+        &rec.rays,
+        &rec.pre.mask,
+        &rec.objects,
+        &hcfg,
+        rad.as_ref(),
+    );
     let person = &p.scene.person;
     let truth = HumanState {
         translation: p.sim.body.joints[0],
@@ -218,11 +249,8 @@ fn refine_from_truth(
     let Some((end, _)) = problem.run(&truth, &hcfg, Draw::Edge(&edge), seed)? else {
         return Ok(None);
     };
-    let (_, iou) = problem.full_loss(&end, &hcfg)?;
-    Ok(Some((
-        1.0 - iou,
-        (end.translation - truth.translation).norm(),
-    )))
+    let data = problem.full_eval(&end, &hcfg)?.data;
+    Ok(Some((data, (end.translation - truth.translation).norm())))
 }
 
 /// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every

@@ -79,6 +79,7 @@ pub struct Planned {
 
 /// A stage-2 variant: Table 1's columns (ablations, then the full model).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Variant {
     /// Without edge sampling.
@@ -87,18 +88,27 @@ pub enum Variant {
     NoSphereTracing,
     /// Without surface smoothing.
     NoSmoothing,
+    /// The paper's binary-mask data term instead of the thermal rise (runs on every capture:
+    /// it is the paper's method, the comparison that matters).
+    NoRadiometric,
     /// The full model.
     Full,
 }
 
 impl Variant {
     /// Every variant, in the table's column order.
-    pub const ALL: [Variant; 4] = [
+    pub const ALL: [Variant; 5] = [
         Variant::NoEdgeSampling,
         Variant::NoSphereTracing,
         Variant::NoSmoothing,
+        Variant::NoRadiometric,
         Variant::Full,
     ];
+
+    /// Whether it runs on every capture (else on the first few of each cell).
+    pub fn on_every_capture(self) -> bool {
+        matches!(self, Variant::NoRadiometric | Variant::Full)
+    }
 
     /// The column heading.
     pub fn heading(self) -> &'static str {
@@ -106,6 +116,7 @@ impl Variant {
             Variant::NoEdgeSampling => "w/o edge sampling",
             Variant::NoSphereTracing => "w/o sphere tracing",
             Variant::NoSmoothing => "w/o surface smoothing",
+            Variant::NoRadiometric => "w/o radiometric fit (mask, as the paper)",
             Variant::Full => "full model",
         }
     }
@@ -116,6 +127,7 @@ impl Variant {
             Variant::NoEdgeSampling => Some(Ablation::EdgeSampling),
             Variant::NoSphereTracing => Some(Ablation::SphereTracing),
             Variant::NoSmoothing => Some(Ablation::Smoothing),
+            Variant::NoRadiometric => Some(Ablation::Radiometric),
             Variant::Full => None,
         }
     }
@@ -209,6 +221,10 @@ pub struct Selection {
     pub cell: Option<Cell>,
     /// Only the full model.
     pub full_only: bool,
+    /// Only these variants (empty: as the set says).
+    pub variants: Vec<Variant>,
+    /// The settings every variant starts from (the variants' ablations on top).
+    pub config: irmirror_recon::pipeline::ReconConfig,
     /// Keep each simulated capture directory (`captures/<id>/capture`).
     pub keep_captures: bool,
 }
@@ -272,6 +288,8 @@ mod tests {
             right_facing_vertex_error_m: None,
             truth_start_loss: Some(0.25),
             truth_start_root_error_m: Some(0.05),
+            truth_flip_loss: Some(0.35),
+            truth_mask_losses: Some([0.2, 0.2]),
             class,
         }
     }
@@ -292,7 +310,7 @@ mod tests {
                 variants: Variant::ALL
                     .iter()
                     // The ablations ran on the first two captures only.
-                    .filter(|&&v| v == Variant::Full || k < 2)
+                    .filter(|&&v| v.on_every_capture() || k < 2)
                     .map(|&v| {
                         // One failure: the full model on the last capture.
                         let failed = v == Variant::Full && k == 2;
@@ -331,7 +349,7 @@ mod tests {
             "{t}"
         );
         assert!(
-            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 1 of 3 | – |"),
+            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | – |"),
             "{t}"
         );
         assert!(
@@ -344,9 +362,11 @@ mod tests {
         );
         // Diagnosis counts: one success, one search failure, none by information, one failed.
         assert!(
-            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 1 | 0.300 / 0.200 / 0.100 / 0.250 |"),
+            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 1 | 0.300 / 0.200 / 0.100 / 0.250 | 2 / 0 of 2 |"),
             "{t}"
         );
+        // Radiometric against the mask: the two captures where both ran.
+        assert!(t.contains("| tabletop-mug | 2 | "), "{t}");
         // Hypotheses: both diagnosed fits face 170° off, so no right-facing hypothesis.
         assert!(t.contains("| 0 of 2 | – (n = 0) |"), "{t}");
         assert!(!t.contains("| car |"), "rows without captures are left out");

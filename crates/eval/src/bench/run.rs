@@ -63,14 +63,17 @@ pub fn run(
         prior: &prior,
     };
     let stage = Staging::new(out, "table.md")?;
-    // The ablation columns run on the first captures of each cell (all of them unless
-    // --full-only): the full model on every capture.
+    // The ablation columns run on the first captures of each cell, the full model and the
+    // paper's mask term on every capture (--full-only: the full model alone).
     let variants_of = |plan: &Planned| -> Vec<Variant> {
         let ablate = !selection.full_only && plan.index < set.ablated_per_cell();
         Variant::ALL
             .iter()
             .copied()
-            .filter(|v| ablate || *v == Variant::Full)
+            .filter(|v| {
+                (*v == Variant::Full || (!selection.full_only && v.on_every_capture()) || ablate)
+                    && (selection.variants.is_empty() || selection.variants.contains(v))
+            })
             .collect()
     };
     progress.start(list.iter().map(|p| variants_of(p).len() as u64).sum());
@@ -85,12 +88,12 @@ pub fn run(
             reason: e.to_string(),
         })?;
         let keep = selection.keep_captures.then(|| thumbs.join("capture"));
-        let p = prepare(&model, plan, &scratch, keep.as_deref())?;
+        let p = prepare(&model, plan, &scratch, keep.as_deref(), &selection.config)?;
         results.push(run_capture(
             &p,
             plan,
             priors,
-            &variants_of(plan),
+            (&variants_of(plan), &selection.config),
             &thumbs,
             progress,
         )?);
@@ -109,7 +112,7 @@ pub fn run(
     )?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": ReconConfig::default(), "random_draws": RANDOM_DRAWS });
+    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "variants": selection.variants, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": selection.config, "random_draws": RANDOM_DRAWS });
     write_text(
         &stage.path("run.toml"),
         &toml::to_string(&record).map_err(|e| ser(&e))?,
@@ -127,8 +130,8 @@ fn prepare(
     plan: &Planned,
     scratch: &Path,
     keep: Option<&Path>,
+    cfg: &ReconConfig,
 ) -> Result<Prepared, EvalError> {
-    let cfg = ReconConfig::default();
     let (seed, mut first) = (plan.seed, 0);
     loop {
         let (scene, attempt) = benchmark_scene(model, plan.cell, seed, plan.netd_mk, first)?;
@@ -164,12 +167,12 @@ fn run_capture(
     p: &Prepared,
     plan: &Planned,
     priors: BodyPriors<'_>,
-    variants: &[Variant],
+    (variants, base): (&[Variant], &ReconConfig),
     thumbs: &Path,
     progress: &dyn BenchProgress,
 ) -> Result<CaptureResult, EvalError> {
     let BodyPriors { model, prior } = priors;
-    let cfg = ReconConfig::default();
+    let cfg = base;
     let (id, seed) = (plan.id.as_str(), plan.seed);
     let mut result = CaptureResult {
         id: id.to_string(),
@@ -208,10 +211,8 @@ fn run_capture(
         .map(|(o, m)| Ok(chamfer_mm2(&object_mesh(o)?, m)))
         .collect::<Result<_, EvalError>>()?;
     for &variant in variants {
-        let cfg = ReconConfig {
-            ablate: variant.ablation().into_iter().collect(),
-            ..ReconConfig::default()
-        };
+        let mut cfg = base.clone();
+        cfg.ablate.extend(variant.ablation());
         let t0 = Instant::now();
         let rec = match reconstruct_human(
             &p.capture,
@@ -240,7 +241,7 @@ fn run_capture(
         let mask = fitted_mask(model, &rec.rays, &body);
         let eval = Some(evaluate(&p.sim, &body, &mask, &rec.objects)?);
         if variant == Variant::Full {
-            result.diagnosis = Some(diagnose(p, priors, &rec, seed)?);
+            result.diagnosis = Some(diagnose(p, priors, &rec, (seed, &cfg))?);
             save_png(
                 &overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
                 &thumbs.join("overlay.png"),
@@ -259,7 +260,7 @@ fn run_capture(
         result.variants.insert(variant, done);
         progress.runs_done(1);
     }
-    result.random = random_baseline(p, priors, &objects, seed)?;
+    result.random = random_baseline(p, priors, &objects, (seed, base))?;
     Ok(result)
 }
 
@@ -269,7 +270,7 @@ fn random_baseline(
     p: &Prepared,
     priors: BodyPriors<'_>,
     objects: &Objects,
-    seed: u64,
+    (seed, cfg): (u64, &ReconConfig),
 ) -> Result<Vec<Evaluation>, EvalError> {
     let BodyPriors { model, prior } = priors;
     let mut rng = irmirror_geom::rng::seeded(seed, 99);
@@ -277,8 +278,7 @@ fn random_baseline(
         * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(
             p.scene.person.rotvec_rad[0],
         ));
-    let cfg = ReconConfig::default();
-    let rays = irmirror_recon::pipeline::reflected_rays(&p.capture, objects, &p.pre.mask, &cfg);
+    let rays = irmirror_recon::pipeline::reflected_rays(&p.capture, objects, &p.pre.mask, cfg);
     (0..RANDOM_DRAWS)
         .map(|_| {
             let latent: Vec<f64> = (0..irmirror_body::prior::LATENT)

@@ -108,6 +108,7 @@ pub fn markdown_table(r: &Report) -> String {
     }
     s.push_str(&diagnosis_table(r));
     s.push_str(&hypotheses_table(r));
+    s.push_str(&radiometric_table(r));
     s.push_str(&objects_table(r));
     s
 }
@@ -118,7 +119,7 @@ pub fn diagnosis_table(r: &Report) -> String {
     for k in FailureClass::ALL {
         s.push_str(&format!(" {} |", k.heading()));
     }
-    s.push_str(" of the search failures, reachable by our model | full model failed | data term, median: fit / truth / truth through the true objects / our model refined from the truth |\n|---|---|---|---|---|---|---|---|\n");
+    s.push_str(" of the search failures, reachable by our model | full model failed | data term, median: fit / truth / truth through the true objects / our model refined from the truth | the truth beats its front/back flip: data term / mask |\n|---|---|---|---|---|---|---|---|---|\n");
     for c in Cell::ALL {
         let caps = of_cell(r, c);
         if caps.is_empty() {
@@ -154,8 +155,18 @@ pub fn diagnosis_table(r: &Report) -> String {
             .iter()
             .filter_map(|d| d.truth_loss_true_objects)
             .collect();
+        // Front/back told apart by the data: the truth scores below its flip.
+        let beats = ds
+            .iter()
+            .filter(|d| d.truth_flip_loss.is_some_and(|f| d.truth_loss < f))
+            .count();
+        let beats_mask = ds
+            .iter()
+            .filter(|d| d.truth_mask_losses.is_some_and(|[t, f]| t < f))
+            .count();
+        let scored = ds.iter().filter(|d| d.truth_flip_loss.is_some()).count();
         s.push_str(&format!(
-            " {reachable} | {failed} | {} / {} / {} / {} |\n",
+            " {reachable} | {failed} | {} / {} / {} / {} | {beats} / {beats_mask} of {scored} |\n",
             median(&fit),
             median(&truth),
             median(&through),
@@ -214,6 +225,55 @@ pub fn hypotheses_table(r: &Report) -> String {
             median(&pick(|e| e.vertex_error_m)),
             median(&pick(|e| e.keypoints_2d_normalised)),
             median(&times),
+        ));
+    }
+    s
+}
+
+/// The thermal rise against the paper's binary mask on the same captures (the captures where
+/// both ran): the best-by-loss hypothesis' facing within 30°, root and per-vertex medians, and
+/// the paired per-vertex difference (radiometric − mask) with its 95 % interval.
+pub fn radiometric_table(r: &Report) -> String {
+    let mut s = String::from(
+        "\n| cell | n (both ran) | facing within 30°, radiometric | facing within 30°, mask | root error median (m), radiometric / mask | per-vertex error median (m), radiometric / mask | per-vertex error, radiometric − mask, mean (m) |\n|---|---|---|---|---|---|---|\n",
+    );
+    for c in Cell::ALL {
+        let pairs: Vec<(&Evaluation, &Evaluation)> = of_cell(r, c)
+            .iter()
+            .filter_map(|x| {
+                let get = |v| x.variants.get(&v).and_then(|y| y.eval.as_ref());
+                Some((get(Variant::Full)?, get(Variant::NoRadiometric)?))
+            })
+            .collect();
+        if pairs.is_empty() {
+            continue;
+        }
+        let (rad, mask): (Vec<&Evaluation>, Vec<&Evaluation>) = pairs.iter().copied().unzip();
+        let facing = |v: &[&Evaluation]| {
+            v.iter()
+                .filter(|e| {
+                    e.facing_error_deg
+                        .is_some_and(|f| f <= super::SUCCESS_FACING_DEG)
+                })
+                .count()
+        };
+        let col = |v: &[&Evaluation], f: fn(&Evaluation) -> Option<f64>| {
+            median(&v.iter().filter_map(|e| f(e)).collect::<Vec<_>>())
+        };
+        let diff: Vec<f64> = pairs
+            .iter()
+            .filter_map(|(a, b)| Some(a.vertex_error_m? - b.vertex_error_m?))
+            .collect();
+        let n = pairs.len();
+        s.push_str(&format!(
+            "| {c} | {n} | {} of {n} | {} of {n} | {} / {} | {} / {} | {} |\n",
+            facing(&rad),
+            facing(&mask),
+            col(&rad, |e| Some(e.root_error_m)),
+            col(&mask, |e| Some(e.root_error_m)),
+            col(&rad, |e| e.vertex_error_m),
+            col(&mask, |e| e.vertex_error_m),
+            cell(&diff, diff.len()),
         ));
     }
     s

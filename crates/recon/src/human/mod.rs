@@ -4,8 +4,10 @@
 //! Parameters per hypothesis: root translation `t` (depth frame, m), root rotation
 //! `R = exp(ω) B` (`B` the initial orientation), the body's height (Anny's phenotype `height`
 //! slider, the other phenotype values at the mean adult: [`shaped_body`]) and the pose latent `z`
-//! (32, the pose prior). Loss: `1 − soft IoU` between the soft occupancy of sampled reflected
-//! rays and the observed mask, plus `w_prior ‖z‖²`, an upright prior, a height prior and —
+//! (32, the pose prior). Loss: a data term — by default the thermal rise itself
+//! ([`radiometric`]: per ray, object reflectance × the met body region's contrast × soft
+//! occupancy, against the observed rise; beyond the paper), or the paper's `1 − soft IoU`
+//! between the soft occupancy of sampled reflected rays and the observed mask — plus `w_prior ‖z‖²`, an upright prior, a height prior and —
 //! where the floor is known (below a table, or the ground a car stands on) — the body's lowest
 //! point on it. The floor and the height together fix what the silhouette alone cannot: a
 //! taller person farther away casts the same mirror image as a shorter one nearer. Gradients:
@@ -25,10 +27,11 @@
 
 mod edge;
 mod problem;
+pub mod radiometric;
 pub mod search;
 
 pub use edge::edge_distance;
-pub use problem::{Draw, Scratch};
+pub use problem::{Draw, FullEval, Scratch};
 
 pub use search::{SearchConfig, fit_human, flipped};
 
@@ -98,6 +101,8 @@ pub struct HumanConfig {
     pub top_k: usize,
     /// How the body's triangles form a ray's occupancy (`irmirror_render::occupancy` docs).
     pub aggregation: Aggregation,
+    /// The radiometric data term ([`radiometric`]).
+    pub radiometric: radiometric::RadiometricConfig,
 }
 
 impl Default for HumanConfig {
@@ -126,6 +131,7 @@ impl Default for HumanConfig {
             search: SearchConfig::default(),
             top_k: 3,
             aggregation: Aggregation::Silhouette,
+            radiometric: radiometric::RadiometricConfig::default(),
         }
     }
 }
@@ -147,8 +153,13 @@ pub struct Hypothesis {
     pub latent: Vec<f64>,
     /// Final loss on all rays at the final σ.
     pub loss: f64,
+    /// Its data term alone (`1 − soft IoU`, or the radiometric term).
+    pub data_loss: f64,
     /// Soft IoU on all rays at the final σ.
     pub soft_iou: f64,
+    /// The radiometric scalars fitted at the end (when that data term is on).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radiometry: Option<FittedRadiometry>,
     /// Loss per step (on that step's sampled rays).
     #[serde(skip)]
     pub loss_curve: Vec<f64>,
@@ -169,6 +180,48 @@ pub struct HumanFit {
     pub rays: usize,
     /// Mask pixels with a ray.
     pub mask_rays: usize,
+    /// The data term fitted: "radiometric", "mask", or "mask (fallback: why)".
+    pub data_term: String,
+}
+
+/// What the radiometric fit says of the scene's materials: each object's reflectance and each
+/// body region's surface temperature.
+#[derive(Clone, Debug, Serialize)]
+pub struct FittedRadiometry {
+    /// LWIR reflectance per object (stage-1 order).
+    pub reflectance: Vec<f64>,
+    /// Surface temperature per region, °C.
+    pub temperature_c: RegionTemperatures,
+}
+
+/// One value per body region, °C.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct RegionTemperatures {
+    /// Clothing.
+    pub clothing: f64,
+    /// Bare skin other than the face.
+    pub skin: f64,
+    /// The face.
+    pub face: f64,
+    /// Hair on the scalp.
+    pub hair: f64,
+}
+
+impl FittedRadiometry {
+    /// From the fitted scalars.
+    pub fn new(r: &radiometric::Radiometry, s: &radiometric::Scalars) -> Self {
+        let [clothing, skin, face, hair] =
+            irmirror_body::Region::ALL.map(|g| r.temperature_c(g, s.contrast[g.index()]));
+        Self {
+            reflectance: s.reflectance.clone(),
+            temperature_c: RegionTemperatures {
+                clothing,
+                skin,
+                face,
+                hair,
+            },
+        }
+    }
 }
 
 /// Everything a fit needs that does not change between hypotheses.
@@ -187,6 +240,8 @@ pub struct HumanProblem<'a> {
     pub objects_centre: Vector3<f64>,
     /// The floor the person stands on, when known.
     pub floor: Option<Floor>,
+    /// The thermal rise per ray for the radiometric data term (`None`: the mask only).
+    pub radiometry: Option<&'a radiometric::Radiometry>,
 }
 
 /// A horizontal floor: height of `p` above it = `up · p − offset_m`.
@@ -299,6 +354,8 @@ pub struct Batch<'a> {
     pub target: &'a [f64],
     /// Weight per ray in the soft IoU (importance weights of a stratified sample); `None`: 1.
     pub weight: Option<&'a [f64]>,
+    /// Observed thermal rise per ray, K, for the radiometric term (`None`: the mask's term).
+    pub rise_k: Option<&'a [f64]>,
     /// Occupancy blur σ, m².
     pub sigma_m2: f64,
 }

@@ -10,11 +10,20 @@ use irmirror_body::model::{BodyGrad, OutputGrads};
 use irmirror_capture::Image;
 use irmirror_geom::optim::{Adam, AdamParams, CosineDecay};
 use irmirror_geom::rotation::{axis_angle_to_matrix, axis_angle_to_matrix_vjp};
+use irmirror_render::hard::first_hit;
 use irmirror_render::occupancy::{
-    Culling, OccupancyGrad, OccupancyParams, SoftRenderer, soft_iou, soft_iou_weighted,
+    Culling, Occupancy, OccupancyGrad, OccupancyParams, SoftRenderer, soft_iou_weighted,
 };
 use irmirror_render::reflect::ReflectedRays;
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+use super::radiometric::{REGIONS, Radiometry, Scalars, TermInput};
+
+/// IRLS rounds of the radiometric scalars' solve per loss evaluation (from the priors' means;
+/// each round solves its weighted least squares exactly). The gradient holds the scalars at
+/// their optimum (envelope theorem): the FD test checks what the rounds leave.
+const SCALAR_SWEEPS: usize = 20;
 
 /// Step of the central difference of the phenotype's shape map in the height slider (the map is
 /// piecewise linear, so this is exact away from its knots and a subgradient on them).
@@ -53,6 +62,9 @@ impl HumanProblem<'_> {
                 shape: vec![],
             },
             d_value: Vec::new(),
+            meet: Meet::default(),
+            scalars: None,
+            data: 0.0,
         })
     }
 
@@ -96,12 +108,7 @@ impl HumanProblem<'_> {
             height,
             latent,
         } = *at;
-        let Batch {
-            rays,
-            target,
-            weight,
-            sigma_m2,
-        } = *batch;
+        let Batch { rays, sigma_m2, .. } = *batch;
         let st = HumanState {
             translation: *t,
             rotation: axis_angle_to_matrix(omega) * base,
@@ -121,16 +128,13 @@ impl HumanProblem<'_> {
             ..OccupancyParams::default()
         };
         let occ = r.forward(rays, &params, Culling::Bvh);
-        let (l_iou, iou) = soft_iou_weighted(
-            &occ.value,
-            |i| target[i],
-            |i| weight.map_or(1.0, |w| w[i]),
-            0.0,
-            &mut ws.d_value,
-        );
+        let (l_data, iou, scalars) =
+            self.data_term(r, &occ, batch, cfg, &mut ws.meet, &mut ws.d_value);
+        ws.scalars = scalars;
+        ws.data = l_data;
         let prior: f64 = latent.iter().map(|x| x * x).sum();
         let up = self.up.normalize();
-        let mut loss = l_iou
+        let mut loss = l_data
             + cfg.w_prior * prior
             + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
         let [h_mean, h_sigma] = cfg.height_prior;
@@ -164,6 +168,9 @@ impl HumanProblem<'_> {
         if let Some((k, d)) = floor {
             ws.occ_grad.vertices[k] += d;
         }
+        if !ws.meet.hits.is_empty() {
+            self.mix_backward(rays, &ws.meet, r.vertices(), &mut ws.occ_grad.vertices);
+        }
         let bg = &mut ws.body_grad;
         self.model.backward(
             &ws.shaped,
@@ -194,6 +201,146 @@ impl HumanProblem<'_> {
         Ok((loss, iou))
     }
 
+    /// The data term on `batch` given the occupancy `occ` of `r`'s mesh: `(D, soft IoU,
+    /// radiometric scalars)`, `∂D/∂occupancy` in `d_value` and, for the radiometric term, where
+    /// each ray meets the body and `∂D/∂β` in `meet`. `D` is `1 − soft IoU`, or the radiometric
+    /// term when it is on and the batch carries the rise.
+    fn data_term(
+        &self,
+        r: &SoftRenderer<f64>,
+        occ: &Occupancy<f64>,
+        batch: &Batch<'_>,
+        cfg: &HumanConfig,
+        meet: &mut Meet,
+        d_value: &mut Vec<f64>,
+    ) -> (f64, f64, Option<Scalars>) {
+        let Batch {
+            rays,
+            target,
+            weight,
+            rise_k,
+            ..
+        } = *batch;
+        let (l_iou, iou) = soft_iou_weighted(
+            &occ.value,
+            |i| target[i],
+            |i| weight.map_or(1.0, |w| w[i]),
+            0.0,
+            d_value,
+        );
+        let (Some(rad), Some(rise_k)) = (self.radiometric(cfg), rise_k) else {
+            meet.hits.clear();
+            return (l_iou, iou, None);
+        };
+        // The radiometric term replaces the mask's (module `radiometric`).
+        let keep = meet.frozen && meet.hits.len() == rays.len();
+        meet.hits.resize(rays.len(), RayHit::default());
+        let (verts, tris) = (r.vertices(), r.triangles());
+        meet.hits.par_iter_mut().enumerate().for_each(|(i, h)| {
+            let (o, d) = (&rays.origin[i], &rays.dir[i]);
+            if !keep {
+                *h = match first_hit(r.bvh(), verts, tris, o, d) {
+                    Some((_, t)) => RayHit {
+                        tri: t,
+                        verts: tris[t as usize],
+                        w: [1.0, 0.0, 0.0],
+                    },
+                    // A miss takes the shares at the nearest point (the silhouette's side),
+                    // without a gradient: its occupancy is below ½.
+                    None => occ
+                        .nearest
+                        .get(i)
+                        .copied()
+                        .flatten()
+                        .map_or(RayHit::default(), |n| RayHit {
+                            tri: NO_HIT,
+                            verts: n.vertices,
+                            w: n.pair.bary,
+                        }),
+                };
+            }
+            if h.tri != NO_HIT
+                && let Some((u, v, _)) = plane_hit(o, d, &h.verts.map(|k| verts[k as usize]))
+            {
+                h.w = [1.0 - u - v, u, v];
+            }
+        });
+        let vreg = &rad.vertex_region;
+        meet.mix.clear();
+        meet.mix.extend(meet.hits.iter().map(|h| {
+            let mut m = [0.0; REGIONS];
+            for (k, w) in h.verts.iter().zip(h.w) {
+                m[vreg[*k as usize].index()] += w;
+            }
+            m
+        }));
+        let input = TermInput {
+            occ: &occ.value,
+            rise_k,
+            mix: &meet.mix,
+            object: &rays.object,
+            weight,
+            share: weight.map_or(rays.len() as f64, |w| w.iter().sum::<f64>())
+                / self.rays.len().max(1) as f64,
+        };
+        let mut scalars = rad.prior_scalars(&cfg.radiometric);
+        rad.solve_scalars(&input, &cfg.radiometric, &mut scalars, SCALAR_SWEEPS);
+        // The mask's term stays beside it with weight `mask_weight`.
+        let w_mask = cfg.radiometric.mask_weight;
+        meet.d_iou.clear();
+        meet.d_iou.extend(d_value.iter().map(|d| d * w_mask));
+        let l = rad.loss(
+            &input,
+            &cfg.radiometric,
+            &scalars,
+            Some((d_value, &mut meet.d_mix)),
+        );
+        for (d, m) in d_value.iter_mut().zip(&meet.d_iou) {
+            *d += m;
+        }
+        (l + w_mask * l_iou, iou, Some(scalars))
+    }
+
+    /// Adds `∂D/∂vertices` through the shares `β` of the rays that hit a triangle on a region
+    /// border (the hit point's barycentric weights move with the triangle).
+    fn mix_backward(
+        &self,
+        rays: &ReflectedRays<f64>,
+        meet: &Meet,
+        verts: &[Vector3<f64>],
+        out: &mut [Vector3<f64>],
+    ) {
+        let Some(rad) = self.radiometry else { return };
+        let vreg = &rad.vertex_region;
+        for (i, h) in meet.hits.iter().enumerate() {
+            if h.tri == NO_HIT {
+                continue;
+            }
+            let [ra, rb, rc] = h.verts.map(|k| vreg[k as usize].index());
+            if ra == rb && ra == rc {
+                continue;
+            }
+            // β = w0 1[a] + u 1[b] + v 1[c], w0 = 1 − u − v.
+            let dm = &meet.d_mix[i];
+            let (gu, gv) = (dm[rb] - dm[ra], dm[rc] - dm[ra]);
+            let tri = h.verts.map(|k| verts[k as usize]);
+            let Some((_, _, m)) = plane_hit(&rays.origin[i], &rays.dir[i], &tri) else {
+                continue;
+            };
+            // M (u, v, t) = o − a ⇒ ∂L/∂v_k = −w_k M⁻ᵀ (∂L/∂u, ∂L/∂v, 0).
+            let Some(lambda) = m
+                .transpose()
+                .try_inverse()
+                .map(|mi| mi * Vector3::new(gu, gv, 0.0))
+            else {
+                continue;
+            };
+            for (k, w) in h.verts.iter().zip(h.w) {
+                out[*k as usize] -= lambda * w;
+            }
+        }
+    }
+
     /// Targets of all rays (1 in the mask).
     pub fn targets(&self) -> Vec<f64> {
         self.rays
@@ -203,16 +350,12 @@ impl HumanProblem<'_> {
             .collect()
     }
 
-    /// The data term of any body mesh (depth frame; e.g. the true body, which the prior need not
-    /// represent): `(1 − soft IoU, soft IoU)` on all rays at the final σ, as the hypotheses'
-    /// `soft_iou` is scored. The failure diagnosis compares it with the fit's.
-    pub fn mesh_data_loss(
-        &self,
-        vertices: &[Vector3<f64>],
-        faces: &[[u32; 3]],
-        cfg: &HumanConfig,
-    ) -> (f64, f64) {
-        let mut renderer = SoftRenderer::new(vertices, faces);
+    /// The data term of any body mesh with the body's topology (depth frame; e.g. the true
+    /// body, which the prior need not represent): `(D, soft IoU)` on all rays at the final σ,
+    /// as the hypotheses' `data_loss` is scored. The failure diagnosis compares it with the
+    /// fit's.
+    pub fn mesh_data_loss(&self, vertices: &[Vector3<f64>], cfg: &HumanConfig) -> (f64, f64) {
+        let mut renderer = SoftRenderer::new(vertices, &self.model.asset.faces);
         renderer.set_vertices(vertices);
         let params = OccupancyParams {
             sigma_m2: cfg.sigma_m2[1],
@@ -221,18 +364,90 @@ impl HumanProblem<'_> {
         };
         let occ = renderer.forward(self.rays, &params, Culling::Bvh);
         let target = self.targets();
-        soft_iou(&occ.value, |i| target[i], 0.0, &mut Vec::new())
+        let batch = self.full_batch(&target, cfg);
+        let (d, iou, _) = self.data_term(
+            &renderer,
+            &occ,
+            &batch,
+            cfg,
+            &mut Meet::default(),
+            &mut Vec::new(),
+        );
+        (d, iou)
+    }
+
+    /// The thermal rise the radiometric model predicts for every ray (K) at state `st`, with the
+    /// scalars fitted there; `None` when that term is off.
+    pub fn predicted_rise(
+        &self,
+        st: &HumanState,
+        cfg: &HumanConfig,
+    ) -> Result<Option<Vec<f64>>, ReconError> {
+        if self.radiometric(cfg).is_none() {
+            return Ok(None);
+        }
+        let posed = super::posed_body(self.model, self.prior, st)?;
+        let mut renderer = SoftRenderer::new(&posed.vertices, &self.model.asset.faces);
+        renderer.set_vertices(&posed.vertices);
+        let params = OccupancyParams {
+            sigma_m2: cfg.sigma_m2[1],
+            aggregation: cfg.aggregation,
+            ..OccupancyParams::default()
+        };
+        let occ = renderer.forward(self.rays, &params, Culling::Bvh);
+        let target = self.targets();
+        let batch = self.full_batch(&target, cfg);
+        let mut meet = Meet::default();
+        let (_, _, scalars) =
+            self.data_term(&renderer, &occ, &batch, cfg, &mut meet, &mut Vec::new());
+        let Some(s) = scalars else { return Ok(None) };
+        Ok(Some(
+            (0..self.rays.len())
+                .map(|i| {
+                    let c: f64 = meet.mix[i]
+                        .iter()
+                        .zip(&s.contrast)
+                        .map(|(b, c)| b * c)
+                        .sum();
+                    s.reflectance[self.rays.object[i] as usize] * c * occ.value[i]
+                })
+                .collect(),
+        ))
+    }
+
+    /// Every ray, with `target` = [`Self::targets`], at the final σ.
+    fn full_batch<'b>(&'b self, target: &'b [f64], cfg: &HumanConfig) -> Batch<'b> {
+        Batch {
+            rays: self.rays,
+            target,
+            weight: None,
+            rise_k: self.radiometry.map(|r| r.rise_k.as_slice()),
+            sigma_m2: cfg.sigma_m2[1],
+        }
     }
 
     /// Loss of a state on all rays at the final σ, and its soft IoU.
     pub fn full_loss(&self, st: &HumanState, cfg: &HumanConfig) -> Result<(f64, f64), ReconError> {
-        let batch = Batch {
-            rays: self.rays,
-            target: &self.targets(),
-            weight: None,
-            sigma_m2: cfg.sigma_m2[1],
-        };
-        self.score(&mut self.scratch()?, st, &batch, cfg)
+        self.full_eval(st, cfg).map(|e| (e.loss, e.soft_iou))
+    }
+
+    /// [`Self::full_loss`] with its data term alone and the radiometric scalars fitted there.
+    pub fn full_eval(&self, st: &HumanState, cfg: &HumanConfig) -> Result<FullEval, ReconError> {
+        let target = self.targets();
+        let batch = self.full_batch(&target, cfg);
+        let mut ws = self.scratch()?;
+        let (loss, soft_iou) = self.score(&mut ws, st, &batch, cfg)?;
+        Ok(FullEval {
+            loss,
+            data: ws.data,
+            soft_iou,
+            scalars: ws.scalars,
+        })
+    }
+
+    /// The radiometric observations when that data term is on.
+    pub fn radiometric(&self, cfg: &HumanConfig) -> Option<&Radiometry> {
+        self.radiometry.filter(|_| cfg.radiometric.enabled)
     }
 
     /// Loss of a state on `batch`, and its soft IoU (no gradient).
@@ -290,6 +505,8 @@ impl HumanProblem<'_> {
             Draw::Fixed(_) => None,
         };
         let (mut sub, mut target, mut idx) = (ReflectedRays::default(), Vec::new(), Vec::new());
+        let rise_all = self.radiometric(cfg).map(|r| r.rise_k.as_slice());
+        let mut rise = Vec::new();
         let mut curve = Vec::with_capacity(cfg.iterations);
         let (mut g, mut step) = (vec![0.0; n], vec![0.0; n]);
         // Draw a fraction of the rays even when the budget would take them all: otherwise a
@@ -322,12 +539,17 @@ impl HumanProblem<'_> {
                         sampler.draw(alpha, tau, m, &mut rng, &mut idx);
                         target.clear();
                         target.extend(idx.iter().map(|&i| target_all[i]));
+                        if let Some(all) = rise_all {
+                            rise.clear();
+                            rise.extend(idx.iter().map(|&i| all[i]));
+                        }
                     }
                     self.rays.select_into(&idx, &mut sub);
                     Batch {
                         rays: &sub,
                         target: &target,
                         weight: None,
+                        rise_k: rise_all.map(|_| rise.as_slice()),
                         sigma_m2: sigma,
                     }
                 }
@@ -381,4 +603,81 @@ pub struct Scratch {
     occ_grad: OccupancyGrad<f64>,
     body_grad: BodyGrad<f64>,
     d_value: Vec<f64>,
+    /// Where each batch ray meets the body (radiometric term).
+    meet: Meet,
+    /// The radiometric scalars of the last evaluation (when that term is on).
+    scalars: Option<Scalars>,
+    /// The data term of the last evaluation.
+    data: f64,
+}
+
+impl Scratch {
+    /// Keeps, from the next evaluation on, the triangle each ray hit at the last one (the hit
+    /// point still moves on its plane). Which triangle a ray hits first changes where one body
+    /// part passes behind another, a jump without a gradient; with it frozen the radiometric
+    /// loss is smooth, which a finite-difference check needs.
+    pub fn freeze_hits(&mut self, frozen: bool) {
+        self.meet.frozen = frozen;
+    }
+}
+
+/// No triangle hit (the ray passes the body).
+const NO_HIT: u32 = u32::MAX;
+
+/// Where a ray meets the body: the triangle it hits first ([`NO_HIT`] for a miss) and the
+/// barycentric weights of the point over `verts` (a miss: the nearest point's).
+#[derive(Clone, Copy, Debug)]
+struct RayHit {
+    tri: u32,
+    verts: [u32; 3],
+    w: [f64; 3],
+}
+
+impl Default for RayHit {
+    fn default() -> Self {
+        Self {
+            tri: NO_HIT,
+            verts: [0; 3],
+            w: [1.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// The radiometric term's per-ray buffers.
+#[derive(Debug, Default)]
+struct Meet {
+    hits: Vec<RayHit>,
+    /// Region shares `β` per ray.
+    mix: Vec<[f64; REGIONS]>,
+    /// `∂D/∂β` per ray.
+    d_mix: Vec<[f64; REGIONS]>,
+    /// The mask term's share of `∂D/∂occupancy`.
+    d_iou: Vec<f64>,
+    /// Keep `hits`' triangles (see [`Scratch::freeze_hits`]).
+    frozen: bool,
+}
+
+/// Where the line `o + t d` crosses the plane of `tri = [a, b, c]`: `(u, v, M)` with
+/// `a + u (b − a) + v (c − a) = o + t d` and `M = [b − a, c − a, −d]`; `None` when parallel.
+fn plane_hit(
+    o: &Vector3<f64>,
+    d: &Vector3<f64>,
+    [a, b, c]: &[Vector3<f64>; 3],
+) -> Option<(f64, f64, Matrix3<f64>)> {
+    let m = Matrix3::from_columns(&[b - a, c - a, -d]);
+    let x = m.try_inverse()? * (o - a);
+    Some((x.x, x.y, m))
+}
+
+/// A state scored on every ray at the final σ.
+#[derive(Clone, Debug)]
+pub struct FullEval {
+    /// The loss (data term and priors).
+    pub loss: f64,
+    /// The data term alone.
+    pub data: f64,
+    /// Soft IoU with the mask.
+    pub soft_iou: f64,
+    /// The radiometric scalars (when that term is on).
+    pub scalars: Option<Scalars>,
 }

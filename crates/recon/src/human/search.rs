@@ -16,6 +16,9 @@
 //!    same. Cheap steps are enough to fall into a basin, not to finish it. Screening, steps and
 //!    ranking all use one fixed batch of `score_rays` rays: every mask ray (up to half) and a
 //!    uniform sample of the others, importance-weighted ([`HumanProblem::stratified_batch`]).
+//!    Screening scores the mask (overlap is what sorts a grid at its blur); the rounds, the
+//!    refinement and the final ranking fit the thermal rise when the radiometric term is on
+//!    ([`super::radiometric`]) — where front and back differ.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
 //!    (root > 25 cm or facing > 45° apart, as reported hypotheses), and the front/back flip of
 //!    each (turned 180° about the up axis through the root): both run the full schedule (edge
@@ -23,8 +26,8 @@
 
 use super::problem::{Draw, Scratch};
 use super::{
-    Batch, HumanConfig, HumanFit, HumanProblem, HumanState, Hypothesis, edge_distance, shaped_body,
-    stature_m, upright_facing,
+    Batch, FittedRadiometry, HumanConfig, HumanFit, HumanProblem, HumanState, Hypothesis,
+    edge_distance, shaped_body, stature_m, upright_facing,
 };
 use crate::ReconError;
 use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle};
@@ -113,11 +116,7 @@ impl HumanProblem<'_> {
     /// (at most half the batch) and uniformly drawn others, each stratum weighted by its
     /// inverse sampling rate. A uniform draw would see a few dozen mask rays on a car door
     /// (a 2,500-pixel reflection among 150,000 object pixels), too few to rank candidates.
-    pub fn stratified_batch(
-        &self,
-        n: usize,
-        seed: u64,
-    ) -> (ReflectedRays<f64>, Vec<f64>, Vec<f64>) {
+    pub fn stratified_batch(&self, n: usize, seed: u64) -> Stratified {
         let target_all = self.targets();
         let (pos, neg): (Vec<usize>, Vec<usize>) =
             (0..self.rays.len()).partition(|&i| target_all[i] > 0.5);
@@ -139,8 +138,14 @@ impl HumanProblem<'_> {
         let idx: Vec<usize> = chosen.iter().map(|c| c.0).collect();
         let mut rays = ReflectedRays::default();
         self.rays.select_into(&idx, &mut rays);
-        let target = idx.iter().map(|&i| target_all[i]).collect();
-        (rays, target, chosen.iter().map(|c| c.1).collect())
+        Stratified {
+            rays,
+            target: idx.iter().map(|&i| target_all[i]).collect(),
+            weight: chosen.iter().map(|c| c.1).collect(),
+            rise_k: self
+                .radiometry
+                .map(|r| idx.iter().map(|&i| r.rise_k[i]).collect()),
+        }
     }
 
     /// The search's candidates (deterministic for `seed`; module docs).
@@ -244,18 +249,23 @@ impl HumanProblem<'_> {
         seed: u64,
     ) -> Result<Vec<HumanState>, ReconError> {
         let s = &cfg.search;
-        let (rays, target, weight) = self.stratified_batch(s.score_rays, seed);
+        let sample = self.stratified_batch(s.score_rays, seed);
         let batch = Batch {
-            rays: &rays,
-            target: &target,
-            weight: Some(&weight),
+            rays: &sample.rays,
+            target: &sample.target,
+            weight: Some(&sample.weight),
+            // The rounds rank on the thermal rise when that term is on.
+            rise_k: sample.rise_k.as_deref().filter(|_| cfg.radiometric.enabled),
             sigma_m2: s.round_sigma_m2[1],
         };
         let t0 = std::time::Instant::now();
         // The grid as it stands, at the starting blur: position along the rays and facing
         // decide most of the overlap, so a forward pass sorts out most candidates.
+        // The screening pass sees the mask: at its blur, overlap is what sorts the grid (and
+        // it is 288 forward passes).
         let coarse = Batch {
             sigma_m2: s.screen_sigma_m2,
+            rise_k: None,
             ..batch
         };
         let mut scored: Vec<(f64, HumanState)> = candidates
@@ -383,6 +393,18 @@ impl HumanProblem<'_> {
     }
 }
 
+/// A fixed stratified batch of rays ([`HumanProblem::stratified_batch`]).
+pub struct Stratified {
+    /// The rays.
+    pub rays: ReflectedRays<f64>,
+    /// Their mask targets.
+    pub target: Vec<f64>,
+    /// Their importance weights.
+    pub weight: Vec<f64>,
+    /// Their thermal rise, K (when the problem has the radiometry).
+    pub rise_k: Option<Vec<f64>>,
+}
+
 /// Fits the person: global search, every survivor refined in parallel, best first, its
 /// front/back partner next, distinct top-k.
 pub fn fit_human(
@@ -393,7 +415,11 @@ pub fn fit_human(
 ) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
     let s = &cfg.search;
     let candidates = s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len();
-    let inits = problem.initial_states(cfg, seed)?;
+    // With a polish, the search and refinement fit the mask and the thermal rise comes last.
+    let polish = cfg.radiometric.polish_iterations;
+    let mut mask_cfg = cfg.clone();
+    mask_cfg.radiometric.enabled = cfg.radiometric.enabled && polish == 0;
+    let inits = problem.initial_states(&mask_cfg, seed)?;
     let t0 = std::time::Instant::now();
     let edge_dist = edge_distance(problem.mask);
     type Run = Option<(usize, HumanState, Vec<f64>)>;
@@ -401,12 +427,24 @@ pub fn fit_human(
         .par_iter()
         .enumerate()
         .map(|(k, init)| {
-            let r = problem.run(
-                init,
-                cfg,
-                Draw::Edge(&edge_dist),
-                seed.wrapping_mul(1000).wrapping_add(k as u64),
-            )?;
+            let run_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
+            let mut r = problem.run(init, &mask_cfg, Draw::Edge(&edge_dist), run_seed)?;
+            if polish > 0
+                && cfg.radiometric.enabled
+                && let Some((st, mut curve)) = r.take()
+            {
+                let polish_cfg = HumanConfig {
+                    iterations: polish,
+                    sigma_m2: [cfg.sigma_m2[1]; 2],
+                    ..cfg.clone()
+                };
+                r = problem
+                    .run(&st, &polish_cfg, Draw::Edge(&edge_dist), run_seed)?
+                    .map(|(s, c)| {
+                        curve.extend(c);
+                        (s, curve)
+                    });
+            }
             progress(k);
             Ok(r.map(|(s, c)| (k, s, c)))
         })
@@ -429,7 +467,11 @@ pub fn fit_human(
     let mut scored: Vec<(Hypothesis, HumanState)> = done
         .into_par_iter()
         .map(|(k, st, curve)| {
-            let (loss, iou) = problem.full_loss(&st, cfg)?;
+            let eval = problem.full_eval(&st, cfg)?;
+            let radiometry = problem
+                .radiometric(cfg)
+                .zip(eval.scalars.as_ref())
+                .map(|(r, s)| FittedRadiometry::new(r, s));
             let h = Hypothesis {
                 init: k,
                 translation_m: st.translation.into(),
@@ -437,8 +479,10 @@ pub fn fit_human(
                 height: st.height,
                 stature_m: stature_m(&shaped_body(problem.model, st.height)?),
                 latent: st.latent.clone(),
-                loss,
-                soft_iou: iou,
+                loss: eval.loss,
+                data_loss: eval.data,
+                soft_iou: eval.soft_iou,
+                radiometry,
                 loss_curve: curve,
             };
             Ok((h, st))
@@ -481,6 +525,11 @@ pub fn fit_human(
             diverged,
             rays: problem.rays.len(),
             mask_rays,
+            data_term: if problem.radiometric(cfg).is_some() {
+                "radiometric".into()
+            } else {
+                "mask".into()
+            },
         },
         states,
     ))

@@ -81,6 +81,8 @@ pub fn small_scene() -> SceneFile {
             yaw_rad: 0.0,
             skin_c: 34.0,
             clothing_c: 30.0,
+            face_c: None,
+            hair_c: None,
         },
         heat_sources: vec![],
         sensor: Sensor::ideal(),

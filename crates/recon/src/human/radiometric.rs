@@ -1,0 +1,677 @@
+//! Beyond the paper: stage 2's radiometric data term — the thermal rise itself, not a binary
+//! mask.
+//!
+//! **Observation model.** A reflected ray `i` off object `k` that the person covers with soft
+//! occupancy `o_i` raises the pixel's apparent temperature over the background by
+//!
+//! ```text
+//! ŷ_i = g_k · c_r(i) · o_i,    c_r = ε_r (B(T_r) − B(T_amb)) / B'(T_amb)
+//! ```
+//!
+//! `g_k` the object's LWIR reflectance (1 − emissivity), `r(i)` the body region the ray meets
+//! (face, hair, bare skin, clothing: `irmirror_body::regions`), `T_r` its surface temperature,
+//! `ε_r` its emissivity, `B` the band radiance and `T_amb` the room the mirror shows without
+//! the person (the background frames' median apparent temperature on the objects). The
+//! occupancy stands for the pixel's coverage; the rise is linear in radiance, so dividing by
+//! `B'` turns radiance into apparent kelvin to first order (≤ 2 % over a 1 K rise).
+//!
+//! **Unknowns.** What the data cannot give alone: each object's reflectance `g_k` and the
+//! person's temperatures. The regions' temperatures are not free: each is the centre of its
+//! cited range (`irmirror_body::regions::THERMAL`) plus one common offset `Δ` (prior N(0, 1 K),
+//! bounded ±2.5 K), so `c_r ≈ a_r + b_r Δ`. Fitting one temperature per region was tried first
+//! and let a body turned around explain a face as 33 °C hair and a misplaced arm as skin at room
+//! temperature (tuning set: the best-by-loss hypothesis faced the wrong way in most tabletop
+//! captures); with the regions tied, the face stays warmer than the hair on the back of a head —
+//! the front/back cue. `g_k` has a prior for glazed ceramic and car paint
+//! ([`RadiometricConfig::reflectance_prior`]) and bounds. Both are solved in closed form inside
+//! every loss evaluation (alternating weighted least squares, a few sweeps).
+//!
+//! **Loss.** `D = [Σ_i w_i ψ((y_i − ŷ_i)/σ) + f P(g, c) − F] / [Σ_i w_i ψ(y_i/σ) − F]`: Huber
+//! `ψ` (quadratic within `huber_sigmas`), `σ` the rise's noise (stage 0's robust estimate),
+//! `w_i` the batch's importance weights, `P` the priors' `½ Σ ((x − x̄)/s)²` (over `g_k` and `Δ`), `f` the batch's
+//! share of all rays (so a sample weighs the priors as the full set would), `F = E ψ(noise) Σ w`
+//! what the noise alone scores. `D` = 1 for "nobody there" and ≈ 0 for a fit down to the noise,
+//! like `1 − IoU`, so the body's priors keep their weight against it. The scalars minimise the numerator, so the gradient w.r.t. the occupancies
+//! holds them fixed (envelope theorem); the region a ray meets is piecewise constant in the
+//! body's parameters and has no gradient.
+
+use crate::ReconError;
+use crate::preprocess::Preprocessed;
+use irmirror_body::Region;
+use irmirror_body::regions::{triangle_regions, vertex_regions};
+use irmirror_capture::planck::band_radiance;
+use irmirror_render::reflect::ReflectedRays;
+use serde::{Deserialize, Serialize};
+
+/// Regions, in `Region::ALL` order.
+pub const REGIONS: usize = 4;
+
+/// Settings of the radiometric data term.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RadiometricConfig {
+    /// Fit the thermal rise (true) or the binary mask (the paper's mode; `--ablate radiometric`).
+    pub enabled: bool,
+    /// Prior on each object's LWIR reflectance: mean and σ. Glazed ceramic (emissivity
+    /// 0.90–0.92) and car paint (0.92–0.94) reflect 6–10 % (e.g. the emissivity tables of
+    /// Optris' and FLIR's thermography guides); polished metal would need its own.
+    pub reflectance_prior: [f64; 2],
+    /// σ of the person's common temperature offset from the regions' range centres, K.
+    pub offset_sigma_k: f64,
+    /// Bound of that offset, K; the reflectances stay within the prior's mean ±
+    /// `reflectance_bound_sigmas` σ. A body part where the mirror shows nothing cannot be
+    /// explained away as skin at room temperature, nor a mug as a mirror that reflects nothing.
+    pub offset_bound_k: f64,
+    /// See `offset_bound_k`.
+    pub reflectance_bound_sigmas: f64,
+    /// Huber threshold of the residuals, in noise σ.
+    pub huber_sigmas: f64,
+    /// Weight of the mask's `1 − soft IoU` kept beside the radiometric term (0: the rise alone).
+    pub mask_weight: f64,
+    /// Steps of the thermal rise after a search and refinement on the mask (0: the rise from
+    /// the search's rounds on).
+    pub polish_iterations: usize,
+}
+
+impl Default for RadiometricConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            reflectance_prior: [0.08, 0.02],
+            offset_sigma_k: 1.0,
+            offset_bound_k: 2.5,
+            reflectance_bound_sigmas: 2.0,
+            huber_sigmas: 3.0,
+            mask_weight: 0.0,
+            polish_iterations: 40,
+        }
+    }
+}
+
+/// What the radiometric term knows of a capture (stage 0) and of the body's regions.
+#[derive(Clone, Debug)]
+pub struct Radiometry {
+    /// Observed rise per ray (aligned with the problem's rays), K.
+    pub rise_k: Vec<f64>,
+    /// Noise σ of the rise, K.
+    pub noise_k: f64,
+    /// Apparent temperature of the room in the mirrors, K.
+    pub ambient_k: f64,
+    /// Objects (rays' `object` indices are below it).
+    pub objects: usize,
+    /// Per region: `c_r` at the centre of its temperature range and `∂c_r/∂Δ`, K and K/K:
+    /// `c_r(Δ) ≈ a_r + b_r Δ` for the person's common offset `Δ`.
+    pub contrast_at: [[f64; 2]; REGIONS],
+    /// Per body vertex: its region.
+    pub vertex_region: Vec<Region>,
+    /// Per body triangle: its region.
+    pub triangle_region: Vec<Region>,
+}
+
+/// `dB/dT`, band radiance per kelvin (central difference; `B` is smooth).
+fn band_slope(temp_k: f64) -> f64 {
+    band_radiance(temp_k + 0.5) - band_radiance(temp_k - 0.5)
+}
+
+/// `c = ε (B(T) − B(T_amb)) / B'(T_amb)`: the apparent-temperature rise (K) of a pixel whose
+/// mirror (reflectance 1) shows, instead of the room at `ambient_k`, a surface at `temp_k` with
+/// emissivity `emissivity` (which also reflects the room).
+pub fn contrast_k(temp_k: f64, emissivity: f64, ambient_k: f64) -> f64 {
+    emissivity * (band_radiance(temp_k) - band_radiance(ambient_k)) / band_slope(ambient_k)
+}
+
+impl Radiometry {
+    /// From stage 0's rise and background; an error when the capture has no background frames
+    /// (the room's temperature is then unknown: the caller falls back to the mask, and says so).
+    pub fn new(
+        pre: &Preprocessed,
+        rays: &ReflectedRays<f64>,
+        model: &irmirror_body::BodyModel,
+    ) -> Result<Self, ReconError> {
+        let ambient_k = pre.background_k.ok_or_else(|| {
+            ReconError::Config(
+                "the radiometric fit needs background frames (`thermal.background` in \
+                 capture.toml) to know the room the mirrors show"
+                    .into(),
+            )
+        })?;
+        if !(pre.noise_k.is_finite() && ambient_k.is_finite()) {
+            return Err(ReconError::Config(
+                "the thermal rise's noise or background is not finite".into(),
+            ));
+        }
+        let vertex_region = vertex_regions(model)?;
+        let triangle_region = triangle_regions(&vertex_region, &model.asset.faces);
+        let contrast_at = Region::ALL.map(|r| {
+            let th = r.thermal();
+            let [lo, hi] = th.temp_c;
+            let mid = irmirror_capture::planck::ZERO_C_K + (lo + hi) / 2.0;
+            [
+                contrast_k(mid, th.emissivity, ambient_k),
+                th.emissivity * band_slope(mid) / band_slope(ambient_k),
+            ]
+        });
+        Ok(Self {
+            rise_k: rays
+                .pixel
+                .iter()
+                .map(|&p| pre.rise_k.data[p as usize])
+                .collect(),
+            // A floor: a noiseless capture would make every residual infinitely certain.
+            noise_k: pre.noise_k.max(1e-3),
+            ambient_k,
+            objects: rays
+                .object
+                .iter()
+                .map(|&k| k as usize + 1)
+                .max()
+                .unwrap_or(1),
+            contrast_at,
+            vertex_region,
+            triangle_region,
+        })
+    }
+
+    /// The surface temperature (°C) of region `r` whose fitted contrast is `c` (inverse of the
+    /// model's `c_r`).
+    pub fn temperature_c(&self, r: Region, c: f64) -> f64 {
+        let l =
+            band_radiance(self.ambient_k) + c * band_slope(self.ambient_k) / r.thermal().emissivity;
+        irmirror_capture::planck::temperature_of(l.max(1e-12)) - irmirror_capture::planck::ZERO_C_K
+    }
+}
+
+/// The fitted scalars: reflectance per object and the person's temperature offset, and the
+/// contrast per region (K) that offset gives.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scalars {
+    /// `g_k` per object.
+    pub reflectance: Vec<f64>,
+    /// `Δ`, K: every region's temperature is its range's centre + `Δ`.
+    pub offset_k: f64,
+    /// `c_r = a_r + b_r Δ` per region, K.
+    pub contrast: [f64; REGIONS],
+}
+
+/// One batch's inputs to the term, per ray.
+pub struct TermInput<'a> {
+    /// Occupancy.
+    pub occ: &'a [f64],
+    /// Observed rise, K.
+    pub rise_k: &'a [f64],
+    /// The regions' shares `β` at the point the ray meets (barycentric weights of the met
+    /// triangle's vertex labels: continuous across region borders; sum 1).
+    pub mix: &'a [[f64; REGIONS]],
+    /// Object index.
+    pub object: &'a [u16],
+    /// Importance weight (`None`: 1).
+    pub weight: Option<&'a [f64]>,
+    /// Share of all rays this batch stands for (scales the priors).
+    pub share: f64,
+}
+
+/// Golden-section steps of the offset per IRLS round: the range (±2.5 K) shrinks to 1e-5 K.
+const GOLDEN_STEPS: usize = 28;
+
+/// The loss' denominator is at least this share of the "nobody" score (a capture whose rise is
+/// all noise is normalised by its noise, not by zero).
+const MIN_SIGNAL_SHARE: f64 = 0.05;
+
+/// `E ψ(z)` for `z ~ N(0, 1)`: Huber's ψ at threshold `delta` averaged over unit noise
+/// (Simpson's rule over ±10; ½ without the threshold).
+fn huber_noise_mean(delta: f64) -> f64 {
+    let n = 2000;
+    let (a, h) = (-10.0, 20.0 / n as f64);
+    let f = |z: f64| huber(z, delta).0 * (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let mut sum = f(a) + f(-a);
+    for k in 1..n {
+        sum += f(a + k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    sum * h / 3.0
+}
+
+/// Huber's ψ and ψ'.
+#[inline]
+fn huber(r: f64, delta: f64) -> (f64, f64) {
+    if r.abs() <= delta {
+        (0.5 * r * r, r)
+    } else {
+        (delta * (r.abs() - 0.5 * delta), delta * r.signum())
+    }
+}
+
+impl Radiometry {
+    /// The priors' means: where the closed-form solve starts.
+    pub fn prior_scalars(&self, cfg: &RadiometricConfig) -> Scalars {
+        Scalars {
+            reflectance: vec![cfg.reflectance_prior[0]; self.objects],
+            offset_k: 0.0,
+            contrast: self.contrast_at.map(|[a, _]| a),
+        }
+    }
+
+    /// The regions' contrasts at offset `d`.
+    fn contrast_of(&self, d: f64) -> [f64; REGIONS] {
+        self.contrast_at.map(|[a, b]| a + b * d)
+    }
+
+    /// `P(g, c)`, the priors' `½ Σ ((x − x̄)/s)²`.
+    fn prior_penalty(&self, s: &Scalars, cfg: &RadiometricConfig) -> f64 {
+        let [gm, gs] = cfg.reflectance_prior;
+        let g: f64 = s
+            .reflectance
+            .iter()
+            .map(|g| 0.5 * ((g - gm) / gs).powi(2))
+            .sum();
+        g + 0.5 * (s.offset_k / cfg.offset_sigma_k).powi(2)
+    }
+
+    /// Solves for the scalars: `sweeps` rounds of Huber's IRLS weights, each minimising the
+    /// weighted least squares exactly — over the offset by golden section on its bounded range
+    /// (the reflectances in closed form at each offset: the problem's profile in `Δ`), since
+    /// `g` and `Δ` trade along a shallow valley that alternating updates walk slowly.
+    pub fn solve_scalars(
+        &self,
+        input: &TermInput<'_>,
+        cfg: &RadiometricConfig,
+        s: &mut Scalars,
+        sweeps: usize,
+    ) {
+        let inv_var = 1.0 / (self.noise_k * self.noise_k);
+        let delta = cfg.huber_sigmas;
+        let w = |i: usize| input.weight.map_or(1.0, |w| w[i]);
+        let n = input.occ.len();
+        let [gm, gs] = cfg.reflectance_prior;
+        let b = cfg.reflectance_bound_sigmas * gs;
+        let (g_lo, g_hi) = ((gm - b).max(1e-3), gm + b);
+        let (p_g, p_d) = (
+            input.share / (gs * gs),
+            input.share / (cfg.offset_sigma_k * cfg.offset_sigma_k),
+        );
+        // Per ray: Σ β a and Σ β b (the contrast is their combination at Δ).
+        let (ma, mb): (Vec<f64>, Vec<f64>) = input
+            .mix
+            .iter()
+            .map(|m| {
+                m.iter()
+                    .zip(&self.contrast_at)
+                    .fold((0.0, 0.0), |(x, y), (beta, [ca, cb])| {
+                        (x + beta * ca, y + beta * cb)
+                    })
+            })
+            .unzip();
+        let mut a = vec![0.0; n];
+        let mut g = s.reflectance.clone();
+        // The weighted least squares at offset `d` with the best reflectances (written to `g`).
+        let profile = |d: f64, a: &[f64], g: &mut [f64]| -> f64 {
+            let (mut num, mut den) = (vec![0.0; self.objects], vec![0.0; self.objects]);
+            for i in 0..n {
+                let x = input.occ[i] * (ma[i] + mb[i] * d);
+                let k = input.object[i] as usize;
+                num[k] += a[i] * x * input.rise_k[i];
+                den[k] += a[i] * x * x;
+            }
+            for k in 0..self.objects {
+                g[k] = ((num[k] + p_g * gm) / (den[k] + p_g)).clamp(g_lo, g_hi);
+            }
+            let mut f = 0.0;
+            for i in 0..n {
+                let r = input.rise_k[i]
+                    - g[input.object[i] as usize] * input.occ[i] * (ma[i] + mb[i] * d);
+                f += a[i] * r * r;
+            }
+            let pg: f64 = g.iter().map(|x| p_g * (x - gm) * (x - gm)).sum();
+            0.5 * (f + pg + p_d * d * d)
+        };
+        for _ in 0..sweeps {
+            // IRLS weight of each ray at the current scalars (1 inside Huber's threshold).
+            for (i, ai) in a.iter_mut().enumerate() {
+                let pred = s.reflectance[input.object[i] as usize]
+                    * input.occ[i]
+                    * (ma[i] + mb[i] * s.offset_k);
+                let r = (input.rise_k[i] - pred) / self.noise_k;
+                *ai = w(i)
+                    * inv_var
+                    * if r.abs() <= delta {
+                        1.0
+                    } else {
+                        delta / r.abs()
+                    };
+            }
+            // Golden section over the offset's range.
+            let phi = 0.5 * (5f64.sqrt() - 1.0);
+            let (mut lo, mut hi) = (-cfg.offset_bound_k, cfg.offset_bound_k);
+            let (mut x1, mut x2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
+            let (mut f1, mut f2) = (profile(x1, &a, &mut g), profile(x2, &a, &mut g));
+            for _ in 0..GOLDEN_STEPS {
+                if f1 <= f2 {
+                    (hi, x2, f2) = (x2, x1, f1);
+                    x1 = hi - phi * (hi - lo);
+                    f1 = profile(x1, &a, &mut g);
+                } else {
+                    (lo, x1, f1) = (x1, x2, f2);
+                    x2 = lo + phi * (hi - lo);
+                    f2 = profile(x2, &a, &mut g);
+                }
+            }
+            // The minimum may sit on a bound, which the section only approaches.
+            let b = cfg.offset_bound_k;
+            let d = [0.5 * (lo + hi), -b, b]
+                .into_iter()
+                .map(|d| (profile(d, &a, &mut g), d))
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+                .map_or(0.0, |(_, d)| d);
+            profile(d, &a, &mut g);
+            s.offset_k = d;
+            s.reflectance.copy_from_slice(&g);
+            s.contrast = self.contrast_of(d);
+        }
+    }
+
+    /// `D` at fixed scalars; with `grad`, writes `∂D/∂o_i` and `∂D/∂β_i` there (length of the
+    /// batch).
+    pub fn loss(
+        &self,
+        input: &TermInput<'_>,
+        cfg: &RadiometricConfig,
+        s: &Scalars,
+        grad: Option<(&mut Vec<f64>, &mut Vec<[f64; REGIONS]>)>,
+    ) -> f64 {
+        let delta = cfg.huber_sigmas;
+        let sigma = self.noise_k;
+        let w = |i: usize| input.weight.map_or(1.0, |w| w[i]);
+        let n = input.occ.len();
+        // What noise alone scores (E ψ(z), z ~ N(0, 1), per unit weight), removed from both
+        // sides: on a car door 150,000 pixels of noise would otherwise bury 2,000 of signal,
+        // and the priors of the body would outweigh the data.
+        let floor = huber_noise_mean(delta) * (0..n).map(w).sum::<f64>();
+        let nobody = (0..n)
+            .map(|i| w(i) * huber(input.rise_k[i] / sigma, delta).0)
+            .sum::<f64>();
+        let norm = (nobody - floor).max(MIN_SIGNAL_SHARE * nobody).max(1e-12);
+        let mut data = 0.0;
+        let mut grad = grad;
+        if let Some((d_occ, d_mix)) = grad.as_mut() {
+            d_occ.clear();
+            d_occ.resize(n, 0.0);
+            d_mix.clear();
+            d_mix.resize(n, [0.0; REGIONS]);
+        }
+        for i in 0..n {
+            let g = s.reflectance[input.object[i] as usize];
+            let c: f64 = input.mix[i]
+                .iter()
+                .zip(&s.contrast)
+                .map(|(b, c)| b * c)
+                .sum();
+            let (psi, dpsi) = huber((input.rise_k[i] - g * c * input.occ[i]) / sigma, delta);
+            data += w(i) * psi;
+            if let Some((d_occ, d_mix)) = grad.as_mut() {
+                // ∂D/∂ŷ_i; ŷ = g o (β · c).
+                let dy = -w(i) * dpsi / sigma / norm;
+                d_occ[i] = dy * g * c;
+                for r in 0..REGIONS {
+                    d_mix[i][r] = dy * g * input.occ[i] * s.contrast[r];
+                }
+            }
+        }
+        (data + input.share * self.prior_penalty(s, cfg) - floor) / norm
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A small synthetic problem: two objects, every region, rises drawn from known scalars.
+    type Synthetic = (
+        Radiometry,
+        Vec<f64>,
+        Vec<f64>,
+        Vec<[f64; REGIONS]>,
+        Vec<u16>,
+        Scalars,
+    );
+
+    /// One-hot shares, every fifth ray on a border between two regions.
+    fn mix_of(i: usize) -> [f64; REGIONS] {
+        let mut m = [0.0; REGIONS];
+        if i.is_multiple_of(5) {
+            m[i % 4] = 0.7;
+            m[(i + 1) % 4] = 0.3;
+        } else {
+            m[i % 4] = 1.0;
+        }
+        m
+    }
+
+    fn synthetic(noise: f64) -> Synthetic {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let n = 400;
+        let contrast_at = [[7.5, 0.7], [10.5, 0.8], [11.5, 0.8], [8.5, 0.75]];
+        let offset_k = 1.2;
+        let truth = Scalars {
+            reflectance: vec![0.09, 0.06],
+            offset_k,
+            contrast: contrast_at.map(|[a, b]| a + b * offset_k),
+        };
+        let occ: Vec<f64> = (0..n)
+            .map(|i| {
+                if i % 3 == 0 {
+                    0.0
+                } else {
+                    rng.random_range(0.0..1.0)
+                }
+            })
+            .collect();
+        let region: Vec<[f64; REGIONS]> = (0..n).map(mix_of).collect();
+        let object: Vec<u16> = (0..n).map(|i| (i / 7 % 2) as u16).collect();
+        let rise: Vec<f64> = (0..n)
+            .map(|i| {
+                let c: f64 = region[i]
+                    .iter()
+                    .zip(&truth.contrast)
+                    .map(|(b, c)| b * c)
+                    .sum();
+                truth.reflectance[object[i] as usize] * c * occ[i]
+                    + noise * rng.random_range(-1.0..1.0)
+            })
+            .collect();
+        let rad = Radiometry {
+            rise_k: rise.clone(),
+            noise_k: 0.05,
+            ambient_k: 295.0,
+            objects: 2,
+            contrast_at,
+            vertex_region: vec![],
+            triangle_region: vec![],
+        };
+        (rad, occ, rise, region, object, truth)
+    }
+
+    /// `∂D/∂o` and `∂D/∂β` at fixed scalars against central differences (f64), with Huber's
+    /// linear branch active on some rays.
+    #[test]
+    fn loss_gradient_matches_finite_differences() {
+        let (rad, occ, rise, region, object, _) = synthetic(0.02);
+        let cfg = RadiometricConfig::default();
+        let weight: Vec<f64> = (0..occ.len()).map(|i| 1.0 + (i % 5) as f64 * 0.3).collect();
+        // Scalars off the truth: large residuals reach Huber's linear branch.
+        let s = Scalars {
+            reflectance: vec![0.12, 0.03],
+            offset_k: -2.0,
+            contrast: [6.0, 9.0, 14.0, 5.0],
+        };
+        let input = |o: &[f64], mix: &[[f64; REGIONS]]| -> f64 {
+            let t = TermInput {
+                occ: o,
+                rise_k: &rise,
+                mix,
+                object: &object,
+                weight: Some(&weight),
+                share: 0.4,
+            };
+            rad.loss(&t, &cfg, &s, None)
+        };
+        let (mut d, mut dm) = (Vec::new(), Vec::new());
+        let t = TermInput {
+            occ: &occ,
+            rise_k: &rise,
+            mix: &region,
+            object: &object,
+            weight: Some(&weight),
+            share: 0.4,
+        };
+        let l = rad.loss(&t, &cfg, &s, Some((&mut d, &mut dm)));
+        assert!((l - input(&occ, &region)).abs() < 1e-15);
+        let linear = (0..occ.len())
+            .filter(|&i| {
+                let c: f64 = region[i].iter().zip(&s.contrast).map(|(b, c)| b * c).sum();
+                let p = s.reflectance[object[i] as usize] * c * occ[i];
+                ((rise[i] - p) / rad.noise_k).abs() > cfg.huber_sigmas
+            })
+            .count();
+        assert!(linear > 10, "only {linear} rays on Huber's linear branch");
+        let dmax = d.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        for i in (0..occ.len()).step_by(7) {
+            let h = 1e-6;
+            let (mut p, mut m) = (occ.clone(), occ.clone());
+            p[i] += h;
+            m[i] -= h;
+            let fd = (input(&p, &region) - input(&m, &region)) / (2.0 * h);
+            assert!(
+                (fd - d[i]).abs() <= 1e-6 * dmax,
+                "ray {i}: {fd} vs {}",
+                d[i]
+            );
+            for r in 0..REGIONS {
+                let (mut p, mut m) = (region.clone(), region.clone());
+                p[i][r] += h;
+                m[i][r] -= h;
+                let fd = (input(&occ, &p) - input(&occ, &m)) / (2.0 * h);
+                assert!(
+                    (fd - dm[i][r]).abs() <= 1e-6 * dmax.max(1e-3),
+                    "ray {i} region {r}: {fd} vs {}",
+                    dm[i][r]
+                );
+            }
+        }
+    }
+
+    /// The closed-form solve finds the scalars that made the data (noise-free, the priors
+    /// weak against 400 rays, some rays mixing two regions) — the products `g·c` and the
+    /// offset — and at its result no scalar can be moved to lower the objective it minimises.
+    #[test]
+    fn scalar_solve_recovers_the_truth_and_is_stationary() {
+        let (rad, occ, rise, region, object, truth) = synthetic(0.0);
+        let cfg = RadiometricConfig::default();
+        let t = TermInput {
+            occ: &occ,
+            rise_k: &rise,
+            mix: &region,
+            object: &object,
+            weight: None,
+            share: 1e-3,
+        };
+        // The product g·c is what the data fix; the priors fix the split. Compare products.
+        let mut s = rad.prior_scalars(&cfg);
+        rad.solve_scalars(&t, &cfg, &mut s, 200);
+        for k in 0..2 {
+            for r in 0..REGIONS {
+                let (got, want) = (
+                    s.reflectance[k] * s.contrast[r],
+                    truth.reflectance[k] * truth.contrast[r],
+                );
+                assert!(
+                    (got - want).abs() < 2e-3 * want,
+                    "object {k} region {r}: {got} vs {want}"
+                );
+            }
+        }
+        // The offset moves every contrast by a few % per kelvin, so it trades with the
+        // reflectance along a shallow valley: known to ± 0.15 K here.
+        assert!((s.offset_k - truth.offset_k).abs() < 0.15, "{}", s.offset_k);
+        // Stationary: the objective (the loss' numerator) does not drop when a scalar moves.
+        let l0 = rad.loss(&t, &cfg, &s, None);
+        for k in 0..3 {
+            for step in [1e-4, -1e-4] {
+                let mut m = s.clone();
+                if k < 2 {
+                    m.reflectance[k] *= 1.0 + step;
+                } else {
+                    m.offset_k += step;
+                    m.contrast = rad.contrast_of(m.offset_k);
+                }
+                assert!(rad.loss(&t, &cfg, &m, None) >= l0 - 1e-12, "scalar {k}");
+            }
+        }
+        // Twelve sweeps (what stage 2 runs) land on the converged objective (`D` ≈ 0 here, the
+        // data being noise-free: within 1e-6 of its scale, 1).
+        let mut s12 = rad.prior_scalars(&cfg);
+        rad.solve_scalars(&t, &cfg, &mut s12, 12);
+        let l12 = rad.loss(&t, &cfg, &s12, None);
+        assert!((l12 - l0).abs() < 1e-6, "12 sweeps: {l12} vs {l0}");
+    }
+
+    /// Where the mirror shows nothing but the body is placed, the solve stops at the bounds: the
+    /// person cools by at most the offset's bound, no object stops reflecting.
+    #[test]
+    fn scalars_stay_within_their_bounds() {
+        let (rad, occ, _, region, object, _) = synthetic(0.0);
+        let cfg = RadiometricConfig::default();
+        let zero = vec![0.0; occ.len()];
+        let t = TermInput {
+            occ: &occ,
+            rise_k: &zero,
+            mix: &region,
+            object: &object,
+            weight: None,
+            share: 1e-3,
+        };
+        let mut s = rad.prior_scalars(&cfg);
+        rad.solve_scalars(&t, &cfg, &mut s, 20);
+        assert_eq!(s.offset_k, -cfg.offset_bound_k);
+        assert_eq!(s.contrast, rad.contrast_of(-cfg.offset_bound_k));
+        let [gm, gs] = cfg.reflectance_prior;
+        for g in &s.reflectance {
+            assert!(
+                (g - (gm - cfg.reflectance_bound_sigmas * gs)).abs() < 1e-12,
+                "{g}"
+            );
+        }
+    }
+
+    /// The noise floor: ½ without a threshold, a little less with one (the linear branch grows
+    /// slower), and the sample mean of ψ over Gaussian draws agrees.
+    #[test]
+    fn noise_floor_is_the_mean_huber_score_of_unit_noise() {
+        assert!((huber_noise_mean(1e3) - 0.5).abs() < 1e-9);
+        let m = huber_noise_mean(3.0);
+        assert!(m < 0.5 && m > 0.49, "{m}");
+        let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+        let n = 200_000;
+        let sample: f64 = (0..n)
+            .map(|_| {
+                huber(
+                    rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng),
+                    3.0,
+                )
+                .0
+            })
+            .sum::<f64>()
+            / n as f64;
+        assert!((sample - m).abs() < 5e-3, "{sample} vs {m}");
+    }
+
+    /// Huber's ψ: quadratic inside, linear outside, continuous with a continuous slope.
+    #[test]
+    fn huber_is_continuous_at_its_threshold() {
+        let d = 3.0;
+        let (a, da) = huber(d - 1e-9, d);
+        let (b, db) = huber(d + 1e-9, d);
+        assert!((a - b).abs() < 1e-8 && (da - db).abs() < 1e-8);
+        assert_eq!(huber(-1.0, d), (0.5, -1.0));
+        assert_eq!(huber(-5.0, d).1, -3.0);
+    }
+}
