@@ -355,24 +355,7 @@ impl HumanProblem<'_> {
     /// as the hypotheses' `data_loss` is scored. The failure diagnosis compares it with the
     /// fit's.
     pub fn mesh_data_loss(&self, vertices: &[Vector3<f64>], cfg: &HumanConfig) -> (f64, f64) {
-        let mut renderer = SoftRenderer::new(vertices, &self.model.asset.faces);
-        renderer.set_vertices(vertices);
-        let params = OccupancyParams {
-            sigma_m2: cfg.sigma_m2[1],
-            aggregation: cfg.aggregation,
-            ..OccupancyParams::default()
-        };
-        let occ = renderer.forward(self.rays, &params, Culling::Bvh);
-        let target = self.targets();
-        let batch = self.full_batch(&target, cfg);
-        let (d, iou, _) = self.data_term(
-            &renderer,
-            &occ,
-            &batch,
-            cfg,
-            &mut Meet::default(),
-            &mut Vec::new(),
-        );
+        let (d, iou, _, _) = self.mesh_eval(vertices, cfg);
         (d, iou)
     }
 
@@ -387,8 +370,32 @@ impl HumanProblem<'_> {
             return Ok(None);
         }
         let posed = super::posed_body(self.model, self.prior, st)?;
-        let mut renderer = SoftRenderer::new(&posed.vertices, &self.model.asset.faces);
-        renderer.set_vertices(&posed.vertices);
+        let (_, _, Some(s), (meet, occ)) = self.mesh_eval(&posed.vertices, cfg) else {
+            return Ok(None);
+        };
+        Ok(Some(
+            (0..self.rays.len())
+                .map(|i| {
+                    let c: f64 = meet.mix[i]
+                        .iter()
+                        .zip(&s.contrast)
+                        .map(|(b, c)| b * c)
+                        .sum();
+                    s.reflectance[self.rays.object[i] as usize] * c * occ[i]
+                })
+                .collect(),
+        ))
+    }
+
+    /// A body mesh (the model's topology) on every ray at the final σ: the data term, the soft
+    /// IoU, the radiometric scalars, and where each ray met the body with its occupancy.
+    fn mesh_eval(
+        &self,
+        vertices: &[Vector3<f64>],
+        cfg: &HumanConfig,
+    ) -> (f64, f64, Option<Scalars>, (Meet, Vec<f64>)) {
+        let mut renderer = SoftRenderer::new(vertices, &self.model.asset.faces);
+        renderer.set_vertices(vertices);
         let params = OccupancyParams {
             sigma_m2: cfg.sigma_m2[1],
             aggregation: cfg.aggregation,
@@ -398,21 +405,9 @@ impl HumanProblem<'_> {
         let target = self.targets();
         let batch = self.full_batch(&target, cfg);
         let mut meet = Meet::default();
-        let (_, _, scalars) =
+        let (d, iou, scalars) =
             self.data_term(&renderer, &occ, &batch, cfg, &mut meet, &mut Vec::new());
-        let Some(s) = scalars else { return Ok(None) };
-        Ok(Some(
-            (0..self.rays.len())
-                .map(|i| {
-                    let c: f64 = meet.mix[i]
-                        .iter()
-                        .zip(&s.contrast)
-                        .map(|(b, c)| b * c)
-                        .sum();
-                    s.reflectance[self.rays.object[i] as usize] * c * occ.value[i]
-                })
-                .collect(),
-        ))
+        (d, iou, scalars, (meet, occ.value))
     }
 
     /// Every ray, with `target` = [`Self::targets`], at the final σ.
