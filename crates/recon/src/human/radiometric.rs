@@ -23,17 +23,22 @@
 //! temperature (tuning set: the best-by-loss hypothesis faced the wrong way in most tabletop
 //! captures); with the regions tied, the face stays warmer than the hair on the back of a head —
 //! the front/back cue. `g_k` has a prior for glazed ceramic and car paint
-//! ([`RadiometricConfig::reflectance_prior`]) and bounds. Both are solved in closed form inside
-//! every loss evaluation (alternating weighted least squares, a few sweeps).
+//! ([`RadiometricConfig::reflectance_prior`]) and bounds. Both are solved inside every loss
+//! evaluation: Huber IRLS rounds, each exact — golden section over `Δ`, the reflectances in
+//! closed form at each `Δ`.
 //!
-//! **Loss.** `D = [Σ_i w_i ψ((y_i − ŷ_i)/σ) + f P(g, c) − F] / [Σ_i w_i ψ(y_i/σ) − F]`: Huber
-//! `ψ` (quadratic within `huber_sigmas`), `σ` the rise's noise (stage 0's robust estimate),
-//! `w_i` the batch's importance weights, `P` the priors' `½ Σ ((x − x̄)/s)²` (over `g_k` and `Δ`), `f` the batch's
-//! share of all rays (so a sample weighs the priors as the full set would), `F = E ψ(noise) Σ w`
-//! what the noise alone scores. `D` = 1 for "nobody there" and ≈ 0 for a fit down to the noise,
-//! like `1 − IoU`, so the body's priors keep their weight against it. The scalars minimise the numerator, so the gradient w.r.t. the occupancies
-//! holds them fixed (envelope theorem); the region a ray meets is piecewise constant in the
-//! body's parameters and has no gradient.
+//! **Loss.** `D = [Σ_i w_i ψ((y_i − ŷ_i)/σ) + f P − F] / [Σ_i w_i ψ(y_i/σ) − F]`: Huber `ψ`
+//! (quadratic within `huber_sigmas`), `σ` the rise's noise (stage 0's robust estimate), `w_i`
+//! the batch's importance weights, `P` the priors' `½ Σ ((x − x̄)/s)²` over `g_k` and `Δ`, `f`
+//! the batch's share of all rays (a sample weighs the priors as the full set would),
+//! `F = E ψ(noise) Σ w` what noise alone scores. `D` = 1 for "nobody there" and ≈ 0 for a fit
+//! down to the noise, like `1 − IoU`, so the body's priors keep their weight against it.
+//!
+//! **Gradient.** The scalars minimise the numerator, so the gradient holds them fixed (envelope
+//! theorem). It flows through the occupancies and through the region shares `β` of each ray's
+//! hit point (the hit point's barycentric weights move with its triangle: `problem.rs`,
+//! `mix_backward`). Which triangle a ray hits first jumps where one body part passes behind
+//! another and has no gradient.
 
 use crate::ReconError;
 use crate::preprocess::Preprocessed;

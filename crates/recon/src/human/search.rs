@@ -16,9 +16,11 @@
 //!    same. Cheap steps are enough to fall into a basin, not to finish it. Screening, steps and
 //!    ranking all use one fixed batch of `score_rays` rays: every mask ray (up to half) and a
 //!    uniform sample of the others, importance-weighted ([`HumanProblem::stratified_batch`]).
-//!    Screening scores the mask (overlap is what sorts a grid at its blur); the rounds, the
-//!    refinement and the final ranking fit the thermal rise when the radiometric term is on
-//!    ([`super::radiometric`]) — where front and back differ.
+//!    Screening scores the mask (overlap is what sorts a grid at its blur). With the
+//!    radiometric term on ([`super::radiometric`]) and `polish_iterations` > 0 (default 40) the
+//!    rounds and the refinement fit the mask too, each refined hypothesis then takes that many
+//!    steps on the thermal rise, and the final ranking is on the rise — where front and back
+//!    differ; with 0 the rounds and the refinement fit the rise throughout.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
 //!    (root > 25 cm or facing > 45° apart, as reported hypotheses), and the front/back flip of
 //!    each (turned 180° about the up axis through the root): both run the full schedule (edge
