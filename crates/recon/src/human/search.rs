@@ -418,9 +418,14 @@ pub fn fit_human(
     let s = &cfg.search;
     let candidates = s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len();
     // With a polish, the search and refinement fit the mask and the thermal rise comes last.
-    let polish = cfg.radiometric.polish_iterations;
+    let thermal = problem.radiometric(cfg).is_some();
+    let polish = if thermal {
+        cfg.radiometric.polish_iterations
+    } else {
+        0
+    };
     let mut mask_cfg = cfg.clone();
-    mask_cfg.radiometric.enabled = cfg.radiometric.enabled && polish == 0;
+    mask_cfg.radiometric.enabled = thermal && polish == 0;
     let inits = problem.initial_states(&mask_cfg, seed)?;
     let t0 = std::time::Instant::now();
     let edge_dist = edge_distance(problem.mask);
@@ -432,7 +437,6 @@ pub fn fit_human(
             let run_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
             let mut r = problem.run(init, &mask_cfg, Draw::Edge(&edge_dist), run_seed)?;
             if polish > 0
-                && cfg.radiometric.enabled
                 && let Some((st, mut curve)) = r.take()
             {
                 let polish_cfg = HumanConfig {
