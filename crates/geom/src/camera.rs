@@ -43,13 +43,22 @@ impl PinholeCamera {
         Ok(cam)
     }
 
-    /// Checks that the intrinsics describe a real camera (positive size and focal lengths, finite
-    /// values, principal point inside the image).
+    /// Checks that the intrinsics describe a real camera (positive size of at most
+    /// [`MAX_SIDE_PX`] a side, positive focal lengths, finite values, principal point inside the
+    /// image). A size beyond any camera's would otherwise surface as an allocation failure when
+    /// an image of it is drawn.
     pub fn validate(&self) -> Result<(), GeomError> {
         let bad = |s: String| Err(GeomError::InvalidCamera(s));
         if self.width == 0 || self.height == 0 {
             return bad(format!(
                 "image size {}×{} must be positive",
+                self.width, self.height
+            ));
+        }
+        if self.width > MAX_SIDE_PX || self.height > MAX_SIDE_PX {
+            return bad(format!(
+                "image size {}×{} exceeds {MAX_SIDE_PX} pixels a side (no thermal, depth or \
+                 RGB camera is that large; a typo?)",
                 self.width, self.height
             ));
         }
@@ -124,6 +133,10 @@ impl PinholeCamera {
     }
 }
 
+/// The largest image side a camera may state, pixels (16K: beyond any thermal, depth or RGB
+/// sensor in use, and an RGB image of it is 0.8 GB).
+pub const MAX_SIDE_PX: u32 = 16_384;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,6 +194,11 @@ mod tests {
         let mut c = cam();
         c.fy = f64::NAN;
         assert!(c.validate().is_err());
+        // 4e9 × 4e9 (issue 22: accepted, then a panic drawing a view after the whole run).
+        let mut c = cam();
+        (c.width, c.height, c.cx, c.cy) = (4_000_000_000, 4_000_000_000, 2e9, 2e9);
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("exceeds 16384"), "{e}");
         // FLIR Lepton-like: 160 px over 57° gives fx ≈ 147.4 px.
         let lepton = PinholeCamera::from_fov(160, 120, 57f64.to_radians()).unwrap();
         assert!((lepton.fx - 147.36).abs() < 0.05, "{}", lepton.fx);

@@ -337,6 +337,19 @@ fn broken_captures_give_clear_errors() {
             "thermal_background.png",
         ),
         (
+            "an extra camera of 4e9 × 4e9 pixels",
+            Box::new(|d| {
+                edit_toml(d, |t| {
+                    t + "\n[[extra_camera]]\nname = \"huge\"\nwidth = 4000000000\n\
+                         height = 4000000000\nfx = 1000.0\nfy = 1000.0\ncx = 2000000000.0\n\
+                         cy = 2000000000.0\n[extra_camera.depth_from_camera]\n\
+                         rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n\
+                         translation_m = [0.0, 0.0, 0.0]\n"
+                })
+            }),
+            "exceeds 16384",
+        ),
+        (
             "rgb wrong size",
             Box::new(|d| image::RgbImage::new(5, 5).save(d.join("rgb.png")).unwrap()),
             "rgb.png",
