@@ -1,0 +1,123 @@
+//! Helpers shared by the stage-2 test binaries (`human`, `radiometric`): the body model and
+//! prior, simulated car and tabletop captures with the true objects' reflected rays, and the
+//! stage-2 problem on them. Each binary uses a subset.
+#![allow(dead_code)]
+
+use irmirror_body::BodyModel;
+use irmirror_body::prior::PosePrior;
+use irmirror_render::reflect::ReflectedRays;
+use irmirror_sim::presets::{Preset, preset_scene};
+use irmirror_sim::scene::{SceneFile, ThermalPreset};
+use irmirror_sim::simulate;
+use nalgebra::Vector3;
+use std::sync::OnceLock;
+
+pub fn model() -> &'static BodyModel {
+    static M: OnceLock<BodyModel> = OnceLock::new();
+    M.get_or_init(|| BodyModel::builtin().unwrap())
+}
+
+pub fn prior() -> &'static PosePrior {
+    static P: OnceLock<PosePrior> = OnceLock::new();
+    P.get_or_init(|| PosePrior::builtin(candle_core::DType::F64).unwrap())
+}
+
+pub fn scene(seed: u64, is_car: bool) -> SceneFile {
+    let t = if std::env::var("BOSON").is_ok() {
+        ThermalPreset::Boson
+    } else {
+        ThermalPreset::Lepton
+    };
+    scene_with(seed, is_car, t)
+}
+
+pub fn scene_with(seed: u64, is_car: bool, t: ThermalPreset) -> SceneFile {
+    let p = if is_car {
+        Preset::Car
+    } else {
+        Preset::Tabletop
+    };
+    preset_scene(model(), p, t, seed).unwrap()
+}
+
+/// A car capture with the true objects' unoccluded reflected rays (stage 0–1 errors kept out).
+pub fn car_capture(seed: u64) -> (SceneFile, irmirror_sim::Simulation, ReflectedRays<f64>) {
+    let sc = scene(seed, true);
+    let sim = simulate(model(), &sc, seed).unwrap();
+    let rays = true_object_rays(&sc, &sim);
+    (sc, sim, rays)
+}
+
+/// The unoccluded reflected rays of the true objects.
+pub fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> ReflectedRays<f64> {
+    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc
+        .objects
+        .iter()
+        .zip(&sim.object_poses)
+        .map(|(o, p)| irmirror_render::sdf::PlacedSdf {
+            sdf: o.shape.sdf(),
+            depth_from_object: *p,
+        })
+        .collect();
+    let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
+    let all = irmirror_render::reflect::reflect_camera(
+        &sc.thermal_camera.intrinsics,
+        &dft,
+        &objs,
+        &Default::default(),
+        irmirror_render::reflect::Normals::Raw,
+    );
+    irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
+}
+
+/// Stage 2's problem on a simulated capture: the person seen through `rays`, facing the first
+/// object, with `mask` and the floor given.
+pub fn problem_for<'a>(
+    sim: &irmirror_sim::Simulation,
+    rays: &'a ReflectedRays<f64>,
+    mask: &'a irmirror_capture::Image<bool>,
+    up: Vector3<f64>,
+    floor: Option<irmirror_recon::human::Floor>,
+) -> irmirror_recon::human::HumanProblem<'a> {
+    irmirror_recon::human::HumanProblem {
+        model: model(),
+        prior: prior(),
+        rays,
+        mask,
+        up,
+        objects_centre: sim.object_poses[0].translation,
+        floor,
+        radiometry: None,
+    }
+}
+
+/// The floor under the true body (its lowest vertex on it), as the pipeline finds the ground
+/// under a car.
+pub fn true_floor(
+    sim: &irmirror_sim::Simulation,
+    up: &Vector3<f64>,
+) -> irmirror_recon::human::Floor {
+    let lowest = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| up.dot(&Vector3::from(v.map(f64::from))))
+        .fold(f64::INFINITY, f64::min);
+    irmirror_recon::human::Floor {
+        up: *up,
+        offset_m: lowest,
+    }
+}
+
+/// The true root rotation (Anny → depth) and the body's up, depth frame.
+pub fn true_root(
+    sc: &SceneFile,
+    sim: &irmirror_sim::Simulation,
+) -> (nalgebra::Matrix3<f64>, Vector3<f64>) {
+    let r = sim.body.depth_from_anny.rotation;
+    (
+        r * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0])),
+        r * Vector3::z(),
+    )
+}

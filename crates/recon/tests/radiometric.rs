@@ -1,0 +1,116 @@
+//! Stage 2's radiometric data term on simulated captures: the observation model against the
+//! simulator's physics, and the fallback to the mask.
+
+mod common;
+
+use common::*;
+use irmirror_sim::scene::ThermalPreset;
+use irmirror_sim::simulate;
+use nalgebra::Vector3;
+
+/// The radiometric observation model against the simulator's physics (closed form): where a
+/// reflected ray of the true car meets the true body inside a region, the noise-free rise the
+/// simulator renders (a traced mirror bounce, Planck radiance, apparent temperature) equals
+/// `(1 − ε_object) · c_region` with `c` from the person's true temperatures — to the model's
+/// first-order conversion of radiance to kelvin.
+#[test]
+fn radiometric_model_matches_the_simulated_rise() {
+    use irmirror_body::Region;
+    use irmirror_body::regions::{triangle_regions, vertex_regions};
+    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
+    use irmirror_recon::human::radiometric::contrast_k;
+    // A Boson-like car capture: enough interior pixels on face, skin and hair too.
+    let sc = scene_with(1, true, ThermalPreset::Boson);
+    let sim = simulate(model(), &sc, 1).unwrap();
+    let rays = true_object_rays(&sc, &sim);
+    let (with, without) = &sim.radiance;
+    let verts: Vec<Vector3<f64>> = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect();
+    let tris = &model().asset.faces;
+    let bvh = irmirror_render::Bvh::build(&verts, tris);
+    let regions = triangle_regions(&vertex_regions(model()).unwrap(), tris);
+    let ambient_k = sc.ambient_c + ZERO_C_K;
+    let reflectance = 1.0 - sc.objects[0].emissivity;
+    let (w, h) = (rays.width as i64, rays.height as i64);
+    let mut ray_of = std::collections::HashMap::new();
+    for (i, &q) in rays.pixel.iter().enumerate() {
+        ray_of.insert(i64::from(q), i);
+    }
+    let region_of = |p: i64| -> Option<Region> {
+        let i = *ray_of.get(&p)?;
+        irmirror_render::hard::first_hit(&bvh, &verts, tris, &rays.origin[i], &rays.dir[i])
+            .map(|(_, t)| regions[t as usize])
+    };
+    let mut checked = std::collections::BTreeMap::new();
+    for &p in &rays.pixel {
+        let p = i64::from(p);
+        let (x, y) = (p % w, p / w);
+        if x < 1 || y < 1 || x >= w - 1 || y >= h - 1 {
+            continue;
+        }
+        // Interior pixels only: the ray and its 8 neighbours meet the same region, so every
+        // sub-pixel ray of the simulator does too.
+        let Some(r) = region_of(p) else { continue };
+        let interior = (-1..=1)
+            .flat_map(|dy| (-1..=1).map(move |dx| p + dy * w + dx))
+            .all(|q| region_of(q) == Some(r));
+        if !interior {
+            continue;
+        }
+        let rendered =
+            temperature_of(with.data[p as usize]) - temperature_of(without.data[p as usize]);
+        let (temp_c, emissivity) = sc.person.region_temperature(r);
+        let model = reflectance * contrast_k(temp_c + ZERO_C_K, emissivity, ambient_k);
+        assert!(
+            (rendered - model).abs() <= 0.03 * model,
+            "pixel ({x}, {y}) {r:?}: rendered {rendered} K, model {model} K"
+        );
+        *checked.entry(format!("{r:?}")).or_insert(0) += 1;
+    }
+    println!("interior pixels checked per region: {checked:?}");
+    assert!(
+        checked.len() >= 3 && checked.values().all(|&n| n >= 3),
+        "{checked:?}"
+    );
+}
+
+/// A capture without background frames cannot give the room's temperature: stage 2 falls
+/// back to the mask, says so in the record (never silently), and the ablation switch gives
+/// the mask on purpose.
+#[test]
+fn without_background_frames_stage_2_fits_the_mask_and_says_why() {
+    use irmirror_recon::pipeline::{Ablation, ReconConfig, radiometry};
+    let (_, sim, rays) = car_capture(1);
+    let (w, h) = (sim.reflection_mask.width, sim.reflection_mask.height);
+    let mut pre = irmirror_recon::preprocess::Preprocessed {
+        rise_k: irmirror_capture::Image::filled(w, h, 0.0),
+        object_pixels: irmirror_capture::Image::filled(w, h, true),
+        raw_mask: sim.reflection_mask.clone(),
+        mask: sim.reflection_mask.clone(),
+        edges: sim.reflection_mask.clone(),
+        threshold_k: 0.1,
+        noise_k: 0.05,
+        background_k: None,
+    };
+    let cfg = ReconConfig::default();
+    let (rad, term) = radiometry(&pre, &rays, model(), &cfg.human_settings()).unwrap();
+    assert!(rad.is_none());
+    assert!(
+        term.starts_with("mask (fallback") && term.contains("thermal.background"),
+        "{term}"
+    );
+    pre.background_k = Some(295.0);
+    let (rad, term) = radiometry(&pre, &rays, model(), &cfg.human_settings()).unwrap();
+    assert!(rad.is_some() && term == "radiometric", "{term}");
+    let ablated = ReconConfig {
+        ablate: vec![Ablation::Radiometric],
+        ..ReconConfig::default()
+    };
+    let (rad, term) = radiometry(&pre, &rays, model(), &ablated.human_settings()).unwrap();
+    assert!(rad.is_none() && term == "mask", "{term}");
+}
