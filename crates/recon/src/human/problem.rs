@@ -285,20 +285,13 @@ impl HumanProblem<'_> {
         };
         let mut scalars = rad.prior_scalars(&cfg.radiometric);
         rad.solve_scalars(&input, &cfg.radiometric, &mut scalars, SCALAR_SWEEPS);
-        // The mask's term stays beside it with weight `mask_weight`.
-        let w_mask = cfg.radiometric.mask_weight;
-        meet.d_iou.clear();
-        meet.d_iou.extend(d_value.iter().map(|d| d * w_mask));
         let l = rad.loss(
             &input,
             &cfg.radiometric,
             &scalars,
             Some((d_value, &mut meet.d_mix)),
         );
-        for (d, m) in d_value.iter_mut().zip(&meet.d_iou) {
-            *d += m;
-        }
-        (l + w_mask * l_iou, iou, Some(scalars))
+        (l, iou, Some(scalars))
     }
 
     /// Adds `∂D/∂vertices` through the shares `β` of the rays that hit a triangle on a region
@@ -646,8 +639,6 @@ struct Meet {
     mix: Vec<[f64; REGIONS]>,
     /// `∂D/∂β` per ray.
     d_mix: Vec<[f64; REGIONS]>,
-    /// The mask term's share of `∂D/∂occupancy`.
-    d_iou: Vec<f64>,
     /// Keep `hits`' triangles (see [`Scratch::freeze_hits`]).
     frozen: bool,
 }

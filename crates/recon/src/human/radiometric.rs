@@ -71,8 +71,6 @@ pub struct RadiometricConfig {
     pub reflectance_bound_sigmas: f64,
     /// Huber threshold of the residuals, in noise σ.
     pub huber_sigmas: f64,
-    /// Weight of the mask's `1 − soft IoU` kept beside the radiometric term (0: the rise alone).
-    pub mask_weight: f64,
     /// Steps of the thermal rise after a search and refinement on the mask (0: the rise from
     /// the search's rounds on).
     pub polish_iterations: usize,
@@ -87,7 +85,6 @@ impl Default for RadiometricConfig {
             offset_bound_k: 2.5,
             reflectance_bound_sigmas: 2.0,
             huber_sigmas: 3.0,
-            mask_weight: 0.0,
             polish_iterations: 40,
         }
     }
