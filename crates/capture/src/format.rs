@@ -51,6 +51,10 @@ pub struct ThermalCameraSpec {
     pub intrinsics: PinholeCamera,
     /// Thermal-camera frame → depth-camera frame.
     pub depth_from_thermal: RigidFile,
+    /// The optics' point spread as a Gaussian σ in pixels, when known (from the lens' MTF or
+    /// a knife-edge measurement); the radiometric fit integrates each pixel's footprint over it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psf_sigma_px: Option<f64>,
 }
 
 /// The depth image.

@@ -11,6 +11,9 @@ use std::path::{Component, Path, PathBuf};
 /// Plausible scene temperatures, K: outside this the units are almost certainly wrong.
 const PLAUSIBLE_K: std::ops::RangeInclusive<f64> = 200.0..=500.0;
 
+/// Largest point spread a capture may state, pixels: beyond it a pixel is not an image point.
+pub const MAX_PSF_SIGMA_PX: f64 = 5.0;
+
 /// One object of the capture.
 #[derive(Clone, Debug)]
 pub struct CapturedObject {
@@ -86,6 +89,14 @@ impl Capture {
             .depth_from_thermal
             .to_rigid()
             .map_err(|e| field("thermal_camera.depth_from_thermal", e.to_string()))?;
+        if let Some(psf) = file.thermal_camera.psf_sigma_px
+            && !(psf.is_finite() && (0.0..=MAX_PSF_SIGMA_PX).contains(&psf))
+        {
+            return Err(field(
+                "thermal_camera.psf_sigma_px",
+                format!("{psf} must be a Gaussian σ in pixels within 0–{MAX_PSF_SIGMA_PX}"),
+            ));
+        }
         if !(file.depth.units_m.is_finite() && file.depth.units_m > 0.0) {
             return Err(field(
                 "depth.units_m",
@@ -280,6 +291,11 @@ impl Capture {
             up,
             file,
         })
+    }
+
+    /// The thermal optics' point spread (Gaussian σ, pixels; 0 when the capture states none).
+    pub fn thermal_psf_sigma_px(&self) -> f64 {
+        self.file.thermal_camera.psf_sigma_px.unwrap_or(0.0)
     }
 
     /// The thermal frame as band radiance, W m⁻² sr⁻¹.

@@ -122,10 +122,11 @@ pub fn run(
     let cfg = load_config(config, ablate)?;
     let capture = Capture::load(capture_dir)?;
     let ctx = || format!("capture {}", capture_dir.display());
+    // Refuse an unusable --out before the work, not after it.
+    let st = Staging::new(out, "run.toml")?;
     match stage {
         Stage::Preprocess => {
             let pre = preprocess(&capture, &cfg.preprocess).with_context(ctx)?;
-            let st = Staging::new(out, "run.toml")?;
             std::fs::create_dir_all(st.path("debug"))?;
             let max = pre.rise_k.data.iter().copied().fold(1e-9, f64::max);
             write_gray8_png(
@@ -157,7 +158,6 @@ pub fn run(
         }
         Stage::Objects => {
             let objs = reconstruct_objects(&capture, &cfg.objects, seed).with_context(ctx)?;
-            let st = Staging::new(out, "run.toml")?;
             std::fs::create_dir_all(st.path("objects"))?;
             for (k, o) in objs.objects.iter().enumerate() {
                 let m = irmirror_eval::views::object_mesh(o)?;
@@ -216,7 +216,6 @@ pub fn run(
             )
             .with_context(ctx)?;
             bars.finish();
-            let st = Staging::new(out, "run.toml")?;
             crate::result::write(&st, "", &capture, &rec, &model, &prior, &cfg)?;
             let html = format!(
                 "{}<h1>irmirror reconstruction</h1><p>Capture: <code>{}</code>; seed {seed}; irmirror {}.</p>{}</body></html>",

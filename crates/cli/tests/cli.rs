@@ -536,7 +536,26 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         );
         assert!(!out2.exists());
     }
-    for d in [cap, out] {
+    // An --out that is not a result is refused before any work: the --out error comes, not
+    // the "no reflection" one the pipeline would give, and the user's file stays.
+    let precious = tmp("rec-precious");
+    std::fs::create_dir_all(&precious).unwrap();
+    std::fs::write(precious.join("notes.txt"), "mine").unwrap();
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        precious.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success()
+            && stderr(&o).contains("not an irmirror result")
+            && !stderr(&o).contains("no reflection"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(precious.join("notes.txt").exists());
+    for d in [cap, out, precious] {
         std::fs::remove_dir_all(d).ok();
     }
 }

@@ -48,6 +48,29 @@ impl Staging {
                     ),
                 ));
             }
+            // An earlier result is replaced whole: only if it holds nothing irmirror did not
+            // write (results from before the listing existed are replaced as they are).
+            if let Ok(listed) = std::fs::read_to_string(target.join(LISTING)) {
+                let listed: std::collections::BTreeSet<&str> = listed.lines().collect();
+                let extra: Vec<String> = files_under(target)
+                    .into_iter()
+                    .filter(|f| f != LISTING && !listed.contains(f.as_str()))
+                    .collect();
+                if !extra.is_empty() {
+                    let shown = extra.iter().take(3).cloned().collect::<Vec<_>>().join(", ");
+                    let more = if extra.len() > 3 {
+                        format!(" and {} more", extra.len() - 3)
+                    } else {
+                        String::new()
+                    };
+                    return Err(err(
+                        target,
+                        &format!(
+                            "is an earlier result that now holds files irmirror did not write ({shown}{more}); move them or choose another --out"
+                        ),
+                    ));
+                }
+            }
         }
         let parent = match target.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -75,8 +98,12 @@ impl Staging {
         self.tmp.join(name)
     }
 
-    /// Moves the finished directory into place (replacing an older result).
+    /// Moves the finished directory into place (replacing an older result), with the list of
+    /// the files it wrote.
     pub fn commit(mut self) -> Result<PathBuf, EvalError> {
+        let mut listing = files_under(&self.tmp).join("\n");
+        listing.push('\n');
+        write_text(&self.path(LISTING), &listing)?;
         if self.target.exists() {
             let old = self.tmp.with_extension("old");
             std::fs::rename(&self.target, &old)
@@ -91,6 +118,34 @@ impl Staging {
         self.committed = true;
         Ok(self.target.clone())
     }
+}
+
+/// The file in every result directory that lists the files irmirror wrote there.
+pub const LISTING: &str = ".irmirror-files";
+
+/// Every file under `dir`, as `/`-separated paths relative to it, sorted.
+fn files_under(dir: &Path) -> Vec<String> {
+    fn walk(base: &Path, dir: &Path, out: &mut Vec<String>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(base, &p, out);
+            } else if let Ok(rel) = p.strip_prefix(base) {
+                let parts: Vec<String> = rel
+                    .components()
+                    .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                    .collect();
+                out.push(parts.join("/"));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
 }
 
 impl Drop for Staging {
@@ -109,4 +164,34 @@ pub fn save_png(img: &RgbImage, path: &Path) -> Result<(), EvalError> {
 /// Writes text, naming the file on failure.
 pub fn write_text(path: &Path, text: &str) -> Result<(), EvalError> {
     std::fs::write(path, text).map_err(|e| io(path, "cannot write", e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A result directory is replaced by the next run, unless someone added a file to it: then
+    /// the run is refused, naming the file, and nothing is lost.
+    #[test]
+    fn a_result_with_added_files_is_not_replaced() {
+        let dir = std::env::temp_dir().join(format!("irmirror-staging-{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        let target = dir.join("result");
+        for round in 0..2 {
+            let st = Staging::new(&target, "run.toml").unwrap();
+            std::fs::create_dir_all(st.path("views")).unwrap();
+            write_text(&st.path("run.toml"), "x").unwrap();
+            write_text(&st.path("views/a.png"), &format!("{round}")).unwrap();
+            st.commit().unwrap();
+        }
+        assert_eq!(
+            std::fs::read_to_string(target.join(LISTING)).unwrap(),
+            "run.toml\nviews/a.png\n"
+        );
+        std::fs::write(target.join("views/notes.txt"), "mine").unwrap();
+        let e = Staging::new(&target, "run.toml").err().unwrap().to_string();
+        assert!(e.contains("views/notes.txt"), "{e}");
+        assert!(target.join("views/notes.txt").exists());
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

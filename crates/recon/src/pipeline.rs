@@ -8,7 +8,10 @@ use crate::preprocess::{PreprocessConfig, Preprocessed, preprocess};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::{Capture, Image};
-use irmirror_render::reflect::{Normals, ReflectedRays, reflect_camera, reflect_footprint};
+use irmirror_geom::{PinholeCamera, Rigid3};
+use irmirror_render::reflect::{
+    Normals, ReflectedRays, reflect_camera, reflect_camera_at, reflect_footprint,
+};
 use irmirror_render::sphere_trace::{SurfaceMethod, TraceParams};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -200,6 +203,10 @@ pub fn reconstruct(
 /// plus, for pixels of the reflection `mask` whose centre misses the fitted objects, a ray through
 /// their footprint where one hits (a reflection hugging a mug's silhouette is otherwise lost to
 /// a fit that is a fraction of a pixel small: 2 of 4 mug captures had no mask pixel left).
+///
+/// With the radiometric term on and a reflection mask of at most `footprint_max_mask_px`
+/// pixels, every pixel near an object is sampled at [`FOOTPRINT_OFFSETS`] instead (its rays
+/// next to each other; see [`footprint_rays`]).
 pub fn reflected_rays(
     capture: &Capture,
     objects: &Objects,
@@ -208,6 +215,19 @@ pub fn reflected_rays(
 ) -> ReflectedRays<f64> {
     let (trace, normals) = cfg.rays_settings();
     let placed = objects.placed();
+    let hcfg = cfg.human_settings();
+    let mask_px = mask.data.iter().filter(|&&m| m).count();
+    let max_px = hcfg.radiometric.footprint_max_mask_px;
+    if hcfg.radiometric.enabled && max_px > 0 && mask_px <= max_px {
+        let rays = footprint_rays(
+            &capture.thermal_camera,
+            &capture.depth_from_thermal,
+            &placed,
+            &trace,
+            normals,
+        );
+        return unblocked(&rays, &placed, objects.ground.plane.as_ref(), &trace);
+    }
     let mut all_rays = reflect_camera(
         &capture.thermal_camera,
         &capture.depth_from_thermal,
@@ -232,6 +252,62 @@ pub fn reflected_rays(
         ));
     }
     unblocked(&all_rays, &placed, objects.ground.plane.as_ref(), &trace)
+}
+
+/// Where a pixel's box is sampled, pixels from its centre: the 2 × 2 Gauss–Legendre nodes
+/// `±1/√12` (exact for coverage that varies linearly or quadratically across the pixel). The
+/// optics' point spread is applied to the samples' sums as a convolution (`radiometric`).
+pub const FOOTPRINT_OFFSETS: [(f64, f64); 4] = {
+    const S: f64 = 0.288_675_134_594_812_9;
+    [(-S, -S), (S, -S), (-S, S), (S, S)]
+};
+
+/// Every thermal pixel within reach of an object (a centre ray hits one in its 3 × 3
+/// neighbourhood) sampled at the 4 [`FOOTPRINT_OFFSETS`], reflected; a pixel's rays lie next to each other in
+/// pixel order, and a node that misses every object has none (it counts as showing the room).
+pub fn footprint_rays(
+    cam: &PinholeCamera,
+    depth_from_camera: &Rigid3<f64>,
+    placed: &[irmirror_render::sdf::PlacedSdf],
+    trace: &TraceParams,
+    normals: Normals,
+) -> ReflectedRays<f64> {
+    let offsets = FOOTPRINT_OFFSETS;
+    let centres = reflect_camera(cam, depth_from_camera, placed, trace, normals);
+    let (w, h) = (cam.width as i64, cam.height as i64);
+    let reach = 1;
+    let mut near = vec![false; (w * h) as usize];
+    for &p in &centres.pixel {
+        let (x, y) = (i64::from(p) % w, i64::from(p) / w);
+        for ny in (y - reach).max(0)..=(y + reach).min(h - 1) {
+            for nx in (x - reach).max(0)..=(x + reach).min(w - 1) {
+                near[(ny * w + nx) as usize] = true;
+            }
+        }
+    }
+    let mut all = ReflectedRays {
+        width: cam.width,
+        height: cam.height,
+        ..Default::default()
+    };
+    for offset in offsets {
+        all.extend(&reflect_camera_at(
+            cam,
+            depth_from_camera,
+            placed,
+            trace,
+            normals,
+            offset,
+            Some(&near),
+        ));
+    }
+    // Pixel order, each pixel's nodes in offset order (a stable sort).
+    let mut order: Vec<usize> = (0..all.len()).collect();
+    order.sort_by_key(|&i| all.pixel[i]);
+    let mut out = ReflectedRays::default();
+    all.select_into(&order, &mut out);
+    out.footprint = offsets.len() as u32;
+    out
 }
 
 /// Stage 2's problem: the person seen through `rays`, the objects' centre (the person faces it,
@@ -305,13 +381,13 @@ pub fn predicted_rise(
         &hcfg,
         Some(&rad),
     );
-    let Some(per_ray) = problem.predicted_rise(st, &hcfg)? else {
+    let Some(per_pixel) = problem.predicted_rise(st, &hcfg)? else {
         return Ok(None);
     };
     let (w, h) = (rec.pre.rise_k.width, rec.pre.rise_k.height);
     let mut img = Image::filled(w, h, 0.0);
-    for (p, y) in rec.rays.pixel.iter().zip(per_ray) {
-        img.data[*p as usize] = y;
+    for (p, y) in per_pixel {
+        img.data[p as usize] = y;
     }
     Ok(Some(img))
 }

@@ -69,6 +69,8 @@ pub struct Preprocessed {
     /// Median apparent temperature of the background frames on object pixels, K (what a mirror
     /// shows of the room where the person is not); `None` without background frames.
     pub background_k: Option<f64>,
+    /// The thermal optics' point spread, Gaussian σ in pixels (0: not stated by the capture).
+    pub psf_sigma_px: f64,
 }
 
 /// Median of a copy of `v` (0 for empty input).
@@ -266,6 +268,7 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         threshold_k,
         noise_k: noise,
         background_k,
+        psf_sigma_px: capture.thermal_psf_sigma_px(),
     })
 }
 

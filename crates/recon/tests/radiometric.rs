@@ -79,6 +79,107 @@ fn radiometric_model_matches_the_simulated_rise() {
     );
 }
 
+/// A pixel integrates its footprint: on a small reflection (Lepton-class car capture), the rise
+/// the simulator renders (2 × 2 sub-pixel rays, then the optics' Gaussian blur) is predicted
+/// by the radiometric term's observation operator (4 rays per pixel at `FOOTPRINT_OFFSETS`,
+/// convolved with the capture's point spread; hard hits on the true body here) much better
+/// than by one ray at each pixel's centre, edges and thin limbs included.
+#[test]
+fn footprint_model_predicts_the_rendered_rise_of_every_pixel() {
+    use irmirror_body::regions::{triangle_regions, vertex_regions};
+    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
+    use irmirror_recon::human::radiometric::{Radiometry, contrast_k};
+    let sc = scene_with(2, true, ThermalPreset::Lepton);
+    let sim = simulate(model(), &sc, 2).unwrap();
+    let blur = sc.sensor.blur_px;
+    assert!(blur > 0.0);
+    let verts: Vec<Vector3<f64>> = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect();
+    let tris = &model().asset.faces;
+    let bvh = irmirror_render::Bvh::build(&verts, tris);
+    let regions = triangle_regions(&vertex_regions(model()).unwrap(), tris);
+    let ambient_k = sc.ambient_c + ZERO_C_K;
+    let (with, without) = &sim.radiance;
+    let (bw, bo) = (
+        irmirror_sim::sensor::blur(with, blur),
+        irmirror_sim::sensor::blur(without, blur),
+    );
+    let rendered: Vec<f64> = bw
+        .data
+        .iter()
+        .zip(&bo.data)
+        .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
+        .collect();
+    let (w, h) = (with.width, with.height);
+    // The term's pixels and operator for `rays`; per pixel Σ_e w_e (1 − ε_object) c_region(e)
+    // over the entries whose ray meets the body.
+    let predict = |rays: &irmirror_render::ReflectedRays<f64>, psf: f64| {
+        let pre = irmirror_recon::preprocess::Preprocessed {
+            rise_k: irmirror_capture::Image::filled(w, h, 0.0),
+            object_pixels: irmirror_capture::Image::filled(w, h, true),
+            raw_mask: sim.reflection_mask.clone(),
+            mask: sim.reflection_mask.clone(),
+            edges: sim.reflection_mask.clone(),
+            threshold_k: 0.1,
+            noise_k: 0.05,
+            background_k: Some(ambient_k),
+            psf_sigma_px: psf,
+        };
+        let rad = Radiometry::new(&pre, rays, model()).unwrap();
+        let ray_rise: Vec<f64> = (0..rays.len())
+            .map(|i| {
+                irmirror_render::hard::first_hit(&bvh, &verts, tris, &rays.origin[i], &rays.dir[i])
+                    .map_or(0.0, |(_, t)| {
+                        let (temp_c, emissivity) =
+                            sc.person.region_temperature(regions[t as usize]);
+                        let g = 1.0 - sc.objects[rays.object[i] as usize].emissivity;
+                        g * contrast_k(temp_c + ZERO_C_K, emissivity, ambient_k)
+                    })
+            })
+            .collect();
+        let mut img = vec![0.0; (w * h) as usize];
+        for (p, &q) in rad.pixel.iter().enumerate() {
+            img[q as usize] = rad.entries[rad.starts[p] as usize..rad.starts[p + 1] as usize]
+                .iter()
+                .map(|&(i, wi)| wi * ray_rise[i as usize])
+                .sum();
+        }
+        img
+    };
+    let footprint = predict(&true_object_footprint_rays(&sc, &sim), blur);
+    let unblurred = predict(&true_object_footprint_rays(&sc, &sim), 0.0);
+    let centre = predict(&true_object_rays(&sc, &sim), blur);
+    let (mut err, mut signal, mut pixels) = ([0.0; 3], 0.0, 0);
+    for p in 0..footprint.len() {
+        let models = [footprint[p], unblurred[p], centre[p]];
+        if rendered[p].abs() < 0.01 && models.iter().all(|m| *m == 0.0) {
+            continue;
+        }
+        for (e, m) in err.iter_mut().zip(models) {
+            *e += (m - rendered[p]).abs();
+        }
+        signal += rendered[p].abs();
+        pixels += 1;
+    }
+    let [fp, unblurred, centre] = err;
+    println!(
+        "{pixels} pixels, rendered Σ|rise| {signal:.2} K; Σ|error|: footprint and point spread \
+         {fp:.2} K, footprint alone {unblurred:.2} K, centre ray {centre:.2} K"
+    );
+    assert!(pixels >= 50, "{pixels} reflection pixels");
+    assert!(fp < 0.25 * centre, "footprint {fp} vs centre {centre}");
+    assert!(
+        fp < 0.5 * unblurred,
+        "footprint {fp} vs without the blur {unblurred}"
+    );
+    assert!(fp < 0.1 * signal, "footprint {fp} vs signal {signal}");
+}
+
 /// A capture without background frames cannot give the room's temperature: stage 2 falls
 /// back to the mask, says so in the record (never silently), and the ablation switch gives
 /// the mask on purpose.
@@ -96,6 +197,7 @@ fn without_background_frames_stage_2_fits_the_mask_and_says_why() {
         threshold_k: 0.1,
         noise_k: 0.05,
         background_k: None,
+        psf_sigma_px: 0.0,
     };
     let cfg = ReconConfig::default();
     let (rad, term) = radiometry(&pre, &rays, model(), &cfg.human_settings()).unwrap();

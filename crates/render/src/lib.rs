@@ -27,7 +27,7 @@ pub use occupancy::{
     Aggregation, Culling, Nearest, Occupancy, OccupancyGrad, OccupancyParams, SoftRenderer,
     soft_iou, soft_iou_loss, soft_iou_weighted,
 };
-pub use reflect::{Normals, ReflectedRays, reflect_camera};
+pub use reflect::{Normals, ReflectedRays, reflect_camera, reflect_camera_at};
 pub use sdf::{Bowl, Capsule, PlacedSdf, RoundedCylinder, Sdf, Sphere};
 pub use sphere_trace::{SurfaceMethod, TraceParams};
 

@@ -43,6 +43,10 @@ pub struct ReflectedRays<T: Real> {
     pub dir: Vec<Vector3<T>>,
     /// Normals used, depth frame.
     pub normal: Vec<Vector3<T>>,
+    /// Rays per pixel when each pixel's footprint is sampled at fixed sub-pixel points (its rays
+    /// then lie next to each other, in pixel order; a point that misses every object has
+    /// none); 0 or 1: at most one ray per pixel.
+    pub footprint: u32,
 }
 
 impl<T: Real> ReflectedRays<T> {
@@ -59,6 +63,7 @@ impl<T: Real> ReflectedRays<T> {
     pub fn select_into(&self, indices: &[usize], out: &mut ReflectedRays<T>) {
         out.width = self.width;
         out.height = self.height;
+        out.footprint = self.footprint;
         out.pixel.clear();
         out.object.clear();
         out.origin.clear();
@@ -102,6 +107,7 @@ impl<T: Real> ReflectedRays<T> {
             origin: c(&self.origin),
             dir: c(&self.dir),
             normal: c(&self.normal),
+            footprint: self.footprint,
         }
     }
 }
@@ -115,13 +121,41 @@ pub fn reflect_camera(
     trace_params: &TraceParams,
     normals: Normals,
 ) -> ReflectedRays<f64> {
+    reflect_camera_at(
+        camera,
+        depth_from_camera,
+        objects,
+        trace_params,
+        normals,
+        (0.0, 0.0),
+        None,
+    )
+}
+
+/// [`reflect_camera`] with every ray shifted by `offset` (pixels) from its pixel's centre, for
+/// the pixels where `only` (row-major, one per pixel) is true, or all. A pixel's footprint
+/// sampled at several offsets is what the radiometric fit integrates; smoothed normals average
+/// the same offset's hits over the 3×3 neighbouring pixels.
+pub fn reflect_camera_at(
+    camera: &PinholeCamera,
+    depth_from_camera: &Rigid3<f64>,
+    objects: &[PlacedSdf],
+    trace_params: &TraceParams,
+    normals: Normals,
+    offset: (f64, f64),
+    only: Option<&[bool]>,
+) -> ReflectedRays<f64> {
     let (w, h) = (camera.width as usize, camera.height as usize);
+    let (du, dv) = offset;
     // Per pixel: (object, camera ray direction, hit).
     let hits: Vec<Option<(u16, Vector3<f64>, SurfaceHit)>> = (0..w * h)
         .into_par_iter()
         .map(|p| {
-            let ray = depth_from_camera
-                .transform_ray(&camera.pixel_ray::<f64>((p % w) as u32, (p / w) as u32));
+            if only.is_some_and(|o| !o[p]) {
+                return None;
+            }
+            let (u, v) = ((p % w) as f64 + 0.5 + du, (p / w) as f64 + 0.5 + dv);
+            let ray = depth_from_camera.transform_ray(&camera.ray_at::<f64>(u, v));
             nearest_hit(objects, &ray, trace_params).map(|(k, hit)| (k, ray.dir, hit))
         })
         .collect();
@@ -307,6 +341,52 @@ mod tests {
         // The centre pixel looks straight at the sphere and is reflected straight back.
         let i = rays.pixel.iter().position(|&p| p == 12 * 32 + 16).unwrap();
         assert!(rays.dir[i].z < -0.99);
+    }
+
+    /// Rays shifted from the pixel centres, on a subset of pixels: each is the analytic
+    /// reflection of the camera ray through its shifted point, and only chosen pixels have one.
+    #[test]
+    fn offset_rays_match_the_closed_form_on_chosen_pixels() {
+        let (c, obj, cam, tight) = mirror_sphere();
+        let (du, dv) = (0.37, -0.21);
+        // Every other column. Column 25 of row 12 has its centre 9.5 px from the sphere's
+        // centre, outside its 9.43 px silhouette; shifted +0.37 px it stays outside.
+        let only: Vec<bool> = (0..32 * 24).map(|p| p % 2 == 1).collect();
+        let rays = reflect_camera_at(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &tight,
+            Normals::Raw,
+            (du, dv),
+            Some(&only),
+        );
+        assert!(rays.len() > 30);
+        assert!(!rays.pixel.contains(&(12 * 32 + 25)));
+        for i in 0..rays.len() {
+            let p = rays.pixel[i];
+            assert!(only[p as usize]);
+            let d: irmirror_geom::Ray<f64> =
+                cam.ray_at(f64::from(p % 32) + 0.5 + du, f64::from(p / 32) + 0.5 + dv);
+            let dir = d.dir.normalize();
+            let b = dir.dot(&(-c));
+            let t = -b - (b * b - (c.norm_squared() - 0.0225)).sqrt();
+            let hit = dir * t;
+            let n = (hit - c) / 0.15;
+            assert!((rays.origin[i] - hit).norm() < 1e-8);
+            assert!((rays.dir[i] - (dir - n * (2.0 * dir.dot(&n)))).norm() < 1e-7);
+        }
+        // Shifting inwards instead reaches a pixel whose centre misses.
+        let inward = reflect_camera_at(
+            &cam,
+            &Rigid3::identity(),
+            std::slice::from_ref(&obj),
+            &tight,
+            Normals::Raw,
+            (-0.37, 0.0),
+            Some(&only),
+        );
+        assert!(inward.pixel.contains(&(12 * 32 + 25)));
     }
 
     /// A pixel whose centre ray passes just outside a mirror sphere but whose footprint grazes it

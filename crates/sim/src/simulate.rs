@@ -369,6 +369,9 @@ impl Simulation {
             thermal_camera: ThermalCameraSpec {
                 intrinsics: self.scene.thermal_camera.intrinsics,
                 depth_from_thermal: self.scene.thermal_camera.depth_from_thermal.clone(),
+                // The sensor's blur is what the camera's datasheet would state.
+                psf_sigma_px: (self.scene.sensor.blur_px > 0.0)
+                    .then_some(self.scene.sensor.blur_px),
             },
             thermal: ThermalSpec {
                 file: "thermal.png".into(),

@@ -350,6 +350,22 @@ fn broken_captures_give_clear_errors() {
             "exceeds 16384",
         ),
         (
+            "a negative point spread",
+            Box::new(|d| {
+                edit_toml(d, |t| {
+                    t.lines()
+                        .filter(|l| !l.starts_with("psf_sigma_px"))
+                        .collect::<Vec<_>>()
+                        .join("\n")
+                        .replace(
+                            "[thermal_camera]\n",
+                            "[thermal_camera]\npsf_sigma_px = -1.0\n",
+                        )
+                })
+            }),
+            "thermal_camera.psf_sigma_px",
+        ),
+        (
             "rgb wrong size",
             Box::new(|d| image::RgbImage::new(5, 5).save(d.join("rgb.png")).unwrap()),
             "rgb.png",

@@ -26,6 +26,7 @@
 //!   partner among them.
 
 mod edge;
+mod observe;
 mod problem;
 pub mod radiometric;
 pub mod search;
@@ -33,6 +34,7 @@ pub mod search;
 pub use edge::edge_distance;
 pub use problem::{Draw, FullEval, Scratch};
 
+pub use observe::{Rise, Selection};
 pub use search::{SearchConfig, fit_human, flipped};
 
 use crate::ReconError;
@@ -354,8 +356,8 @@ pub struct Batch<'a> {
     pub target: &'a [f64],
     /// Weight per ray in the soft IoU (importance weights of a stratified sample); `None`: 1.
     pub weight: Option<&'a [f64]>,
-    /// Observed thermal rise per ray, K, for the radiometric term (`None`: the mask's term).
-    pub rise_k: Option<&'a [f64]>,
+    /// The observed thermal rise for the radiometric term (`None`: the mask's term).
+    pub rise: Option<Rise<'a>>,
     /// Occupancy blur σ, m².
     pub sigma_m2: f64,
 }

@@ -18,6 +18,7 @@ use irmirror_render::reflect::ReflectedRays;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
+use super::observe::Selection;
 use super::radiometric::{REGIONS, Radiometry, Scalars, TermInput};
 
 /// IRLS rounds of the radiometric scalars' solve per loss evaluation (from the priors' means;
@@ -218,7 +219,7 @@ impl HumanProblem<'_> {
             rays,
             target,
             weight,
-            rise_k,
+            rise,
             ..
         } = *batch;
         let (l_iou, iou) = soft_iou_weighted(
@@ -228,7 +229,7 @@ impl HumanProblem<'_> {
             0.0,
             d_value,
         );
-        let (Some(rad), Some(rise_k)) = (self.radiometric(cfg), rise_k) else {
+        let (Some(rad), Some(rise)) = (self.radiometric(cfg), rise) else {
             meet.hits.clear();
             return (l_iou, iou, None);
         };
@@ -276,12 +277,12 @@ impl HumanProblem<'_> {
         }));
         let input = TermInput {
             occ: &occ.value,
-            rise_k,
             mix: &meet.mix,
-            object: &rays.object,
-            weight,
-            share: weight.map_or(rays.len() as f64, |w| w.iter().sum::<f64>())
-                / self.rays.len().max(1) as f64,
+            rise,
+            share: rise
+                .weight
+                .map_or(rise.rise_k.len() as f64, |w| w.iter().sum::<f64>())
+                / rad.pixels().max(1) as f64,
         };
         let mut scalars = rad.prior_scalars(&cfg.radiometric);
         rad.solve_scalars(&input, &cfg.radiometric, &mut scalars, SCALAR_SWEEPS);
@@ -352,30 +353,32 @@ impl HumanProblem<'_> {
         (d, iou)
     }
 
-    /// The thermal rise the radiometric model predicts for every ray (K) at state `st`, with the
-    /// scalars fitted there; `None` when that term is off.
+    /// The thermal rise the radiometric model predicts for every pixel of its rays (K) at
+    /// state `st`, with the scalars fitted there: `(pixel index, rise)`; `None` when that term
+    /// is off.
     pub fn predicted_rise(
         &self,
         st: &HumanState,
         cfg: &HumanConfig,
-    ) -> Result<Option<Vec<f64>>, ReconError> {
-        if self.radiometric(cfg).is_none() {
+    ) -> Result<Option<Vec<(u32, f64)>>, ReconError> {
+        let Some(rad) = self.radiometric(cfg) else {
             return Ok(None);
-        }
+        };
         let posed = super::posed_body(self.model, self.prior, st)?;
         let (_, _, Some(s), (meet, occ)) = self.mesh_eval(&posed.vertices, cfg) else {
             return Ok(None);
         };
+        let input = TermInput {
+            occ: &occ,
+            mix: &meet.mix,
+            rise: rad.rise(),
+            share: 1.0,
+        };
         Ok(Some(
-            (0..self.rays.len())
-                .map(|i| {
-                    let c: f64 = meet.mix[i]
-                        .iter()
-                        .zip(&s.contrast)
-                        .map(|(b, c)| b * c)
-                        .sum();
-                    s.reflectance[self.rays.object[i] as usize] * c * occ[i]
-                })
+            rad.pixel
+                .iter()
+                .copied()
+                .zip(rad.predict(&input, &s))
                 .collect(),
         ))
     }
@@ -409,7 +412,7 @@ impl HumanProblem<'_> {
             rays: self.rays,
             target,
             weight: None,
-            rise_k: self.radiometry.map(|r| r.rise_k.as_slice()),
+            rise: self.radiometry.map(Radiometry::rise),
             sigma_m2: cfg.sigma_m2[1],
         }
     }
@@ -477,15 +480,17 @@ impl HumanProblem<'_> {
         lr.push(cfg.lr_height);
         lr.extend(vec![cfg.lr_latent; n_lat]);
         let mut rng = irmirror_geom::rng::seeded(seed, 31);
+        // What a step draws: the radiometric term's pixels (with every ray their predictions
+        // weigh), else rays.
+        let rad = self.radiometric(cfg);
+        let units = rad.map_or(self.rays.len(), |r| r.pixels());
+        let unit_pixel = |u: usize| rad.map_or(self.rays.pixel[u], |r| r.pixel[u]);
         // Edge draws: the sampler and every ray's target (a fixed batch brings its own).
         let mut edge = match draw {
             Draw::Edge(edge_dist) => Some((
                 EdgeSampler::new(
-                    &self
-                        .rays
-                        .pixel
-                        .iter()
-                        .map(|&p| edge_dist.data[p as usize])
+                    &(0..units)
+                        .map(|u| edge_dist.data[unit_pixel(u) as usize])
                         .collect::<Vec<f64>>(),
                 ),
                 self.targets(),
@@ -493,15 +498,15 @@ impl HumanProblem<'_> {
             Draw::Fixed(_) => None,
         };
         let (mut sub, mut target, mut idx) = (ReflectedRays::default(), Vec::new(), Vec::new());
-        let rise_all = self.radiometric(cfg).map(|r| r.rise_k.as_slice());
-        let mut rise = Vec::new();
+        let (mut drawn, mut selection) = (Vec::new(), Selection::default());
         let mut curve = Vec::with_capacity(cfg.iterations);
         let (mut g, mut step) = (vec![0.0; n], vec![0.0; n]);
         // Draw a fraction of the rays even when the budget would take them all: otherwise a
-        // small capture sees every ray each step and edge sampling changes nothing.
-        let m = cfg
-            .rays_per_iteration
-            .min((self.rays.len() as f64 * cfg.max_ray_fraction).ceil() as usize)
+        // small capture sees every ray each step and edge sampling changes nothing. The ray
+        // budget in units (the same number with one ray per unit).
+        let m = (cfg.rays_per_iteration * units)
+            .div_ceil(self.rays.len().max(1))
+            .min((units as f64 * cfg.max_ray_fraction).ceil() as usize)
             .max(1);
         let iters = cfg.iterations.max(1);
         for it in 0..iters {
@@ -524,20 +529,23 @@ impl HumanProblem<'_> {
                         (0.0, 1.0)
                     };
                     if let Some((sampler, target_all)) = edge.as_mut() {
-                        sampler.draw(alpha, tau, m, &mut rng, &mut idx);
+                        match rad {
+                            Some(r) => {
+                                sampler.draw(alpha, tau, m, &mut rng, &mut drawn);
+                                r.select(&drawn, &mut selection);
+                                idx.clone_from(&selection.rays);
+                            }
+                            None => sampler.draw(alpha, tau, m, &mut rng, &mut idx),
+                        }
                         target.clear();
                         target.extend(idx.iter().map(|&i| target_all[i]));
-                        if let Some(all) = rise_all {
-                            rise.clear();
-                            rise.extend(idx.iter().map(|&i| all[i]));
-                        }
                     }
                     self.rays.select_into(&idx, &mut sub);
                     Batch {
                         rays: &sub,
                         target: &target,
                         weight: None,
-                        rise_k: rise_all.map(|_| rise.as_slice()),
+                        rise: rad.map(|_| selection.rise(None)),
                         sigma_m2: sigma,
                     }
                 }

@@ -1,19 +1,25 @@
 //! Beyond the paper: stage 2's radiometric data term — the thermal rise itself, not a binary
 //! mask.
 //!
-//! **Observation model.** A reflected ray `i` off object `k` that the person covers with soft
-//! occupancy `o_i` raises the pixel's apparent temperature over the background by
+//! **Observation model.** A reflected ray `i` that the person covers with soft occupancy `o_i`
+//! shows, instead of the room, the body region `r(i)` it meets; pixel `p` integrates the rays
+//! of its footprint through the optics' point spread:
 //!
 //! ```text
-//! ŷ_i = g_k · c_r(i) · o_i,    c_r = ε_r (B(T_r) − B(T_amb)) / B'(T_amb)
+//! ŷ_p = g_k(p) · Σ_i W_pi · o_i · c_r(i),    c_r = ε_r (B(T_r) − B(T_amb)) / B'(T_amb)
 //! ```
 //!
-//! `g_k` the object's LWIR reflectance (1 − emissivity), `r(i)` the body region the ray meets
-//! (face, hair, bare skin, clothing: `irmirror_body::regions`), `T_r` its surface temperature,
-//! `ε_r` its emissivity, `B` the band radiance and `T_amb` the room the mirror shows without
-//! the person (the background frames' median apparent temperature on the objects). The
-//! occupancy stands for the pixel's coverage; the rise is linear in radiance, so dividing by
-//! `B'` turns radiance into apparent kelvin to first order (≤ 2 % over a 1 K rise).
+//! `W` the observation operator: each pixel is sampled by 4 rays (the box's 2 × 2
+//! Gauss–Legendre nodes, `pipeline::FOOTPRINT_OFFSETS`; a node that misses the objects shows
+//! the room) and their mean is convolved with the capture's Gaussian point spread
+//! (`thermal_camera.psf_sigma_px`), so a pixel half covered rises half as much and a thin
+//! limb spreads into its neighbours (with `footprint` off: one ray per pixel, `W` = 1). `g_k`
+//! the LWIR reflectance (1 − emissivity) of the object under most of the pixel's weight, `T_r`
+//! the region's surface temperature (face, hair, bare skin, clothing:
+//! `irmirror_body::regions`), `ε_r` its emissivity, `B` the band radiance and `T_amb` the
+//! room the mirror shows without the person (the background frames' median apparent
+//! temperature on the objects). The rise is linear in radiance, so dividing by `B'` turns
+//! radiance into apparent kelvin to first order (≤ 2 % over a 1 K rise).
 //!
 //! **Unknowns.** What the data cannot give alone: each object's reflectance `g_k` and the
 //! person's temperatures. The regions' temperatures are not free: each is the centre of its
@@ -27,19 +33,20 @@
 //! evaluation: Huber IRLS rounds, each exact — golden section over `Δ`, the reflectances in
 //! closed form at each `Δ`.
 //!
-//! **Loss.** `D = [Σ_i w_i ψ((y_i − ŷ_i)/σ) + f P − F] / [Σ_i w_i ψ(y_i/σ) − F]`: Huber `ψ`
-//! (quadratic within `huber_sigmas`), `σ` the rise's noise (stage 0's robust estimate), `w_i`
+//! **Loss.** `D = [Σ_p w_p ψ((y_p − ŷ_p)/σ) + f P − F] / [Σ_p w_p ψ(y_p/σ) − F]`: Huber `ψ`
+//! (quadratic within `huber_sigmas`), `σ` the rise's noise (stage 0's robust estimate), `w_p`
 //! the batch's importance weights, `P` the priors' `½ Σ ((x − x̄)/s)²` over `g_k` and `Δ`, `f`
-//! the batch's share of all rays (a sample weighs the priors as the full set would),
+//! the batch's share of all pixels (a sample weighs the priors as the full set would),
 //! `F = E ψ(noise) Σ w` what noise alone scores. `D` = 1 for "nobody there" and ≈ 0 for a fit
 //! down to the noise, like `1 − IoU`, so the body's priors keep their weight against it.
 //!
 //! **Gradient.** The scalars minimise the numerator, so the gradient holds them fixed (envelope
-//! theorem). It flows through the occupancies and through the region shares `β` of each ray's
-//! hit point (the hit point's barycentric weights move with its triangle: `problem.rs`,
-//! `mix_backward`). Which triangle a ray hits first jumps where one body part passes behind
-//! another and has no gradient.
+//! theorem). It flows back through `W` (a ray feeds several pixels) to the occupancies and
+//! through the region shares `β` of each ray's hit point (the hit point's barycentric weights
+//! move with its triangle: `problem.rs`, `mix_backward`). Which triangle a ray hits first
+//! jumps where one body part passes behind another and has no gradient.
 
+use super::observe::Rise;
 use crate::ReconError;
 use crate::preprocess::Preprocessed;
 use irmirror_body::Region;
@@ -74,6 +81,13 @@ pub struct RadiometricConfig {
     /// Steps of the thermal rise after a search and refinement on the mask (0: the rise from
     /// the search's rounds on).
     pub polish_iterations: usize,
+    /// Integrate each pixel's footprint (4 rays through the pixel's box, their mean convolved
+    /// with the capture's point spread; [`crate::pipeline::FOOTPRINT_OFFSETS`]) rather than
+    /// one ray at its centre, when the reflection mask has at most this many pixels (0: never).
+    /// A pixel half covered by the reflection rises half as much: on a 20-pixel reflection
+    /// the edges are most of what the image says, on a 4,000-pixel one a few per cent, for 4×
+    /// the rays (a car door's 150,000 object pixels would take 1 GB).
+    pub footprint_max_mask_px: usize,
 }
 
 impl Default for RadiometricConfig {
@@ -86,6 +100,7 @@ impl Default for RadiometricConfig {
             reflectance_bound_sigmas: 2.0,
             huber_sigmas: 3.0,
             polish_iterations: 40,
+            footprint_max_mask_px: 1000,
         }
     }
 }
@@ -93,8 +108,18 @@ impl Default for RadiometricConfig {
 /// What the radiometric term knows of a capture (stage 0) and of the body's regions.
 #[derive(Clone, Debug)]
 pub struct Radiometry {
-    /// Observed rise per ray (aligned with the problem's rays), K.
+    /// Pixels the term scores (row-major image index): those the rays sample and, with a
+    /// point spread, their neighbours within its reach.
+    pub pixel: Vec<u32>,
+    /// Observed rise per scored pixel, K.
     pub rise_k: Vec<f64>,
+    /// The object whose reflectance a pixel's prediction takes (that of most of its weight).
+    pub object: Vec<u16>,
+    /// Pixel `p`'s prediction weighs the rays `entries[starts[p]..starts[p + 1]]`.
+    pub starts: Vec<u32>,
+    /// `(ray among the problem's rays, weight)`: the observation operator, point spread ×
+    /// footprint sampling (the weights of a pixel far from the objects' edges sum to 1).
+    pub entries: Vec<(u32, f64)>,
     /// Noise σ of the rise, K.
     pub noise_k: f64,
     /// Apparent temperature of the room in the mirrors, K.
@@ -153,12 +178,17 @@ impl Radiometry {
                 th.emissivity * band_slope(mid) / band_slope(ambient_k),
             ]
         });
+        let op = super::observe::observation_operator(rays, pre.psf_sigma_px);
         Ok(Self {
-            rise_k: rays
+            rise_k: op
                 .pixel
                 .iter()
                 .map(|&p| pre.rise_k.data[p as usize])
                 .collect(),
+            pixel: op.pixel,
+            object: op.object,
+            starts: op.starts,
+            entries: op.entries,
             // A floor: a noiseless capture would make every residual infinitely certain.
             noise_k: pre.noise_k.max(1e-3),
             ambient_k,
@@ -195,21 +225,51 @@ pub struct Scalars {
     pub contrast: [f64; REGIONS],
 }
 
-/// One batch's inputs to the term, per ray.
+/// One batch's inputs to the term: per ray, and per pixel.
 pub struct TermInput<'a> {
-    /// Occupancy.
+    /// Occupancy per ray.
     pub occ: &'a [f64],
-    /// Observed rise, K.
-    pub rise_k: &'a [f64],
-    /// The regions' shares `β` at the point the ray meets (barycentric weights of the met
+    /// The regions' shares `β` at the point each ray meets (barycentric weights of the met
     /// triangle's vertex labels: continuous across region borders; sum 1).
     pub mix: &'a [[f64; REGIONS]],
-    /// Object index.
-    pub object: &'a [u16],
-    /// Importance weight (`None`: 1).
-    pub weight: Option<&'a [f64]>,
-    /// Share of all rays this batch stands for (scales the priors).
+    /// The pixels.
+    pub rise: Rise<'a>,
+    /// Share of all pixels this batch stands for (scales the priors).
     pub share: f64,
+}
+
+impl TermInput<'_> {
+    /// Pixels.
+    fn pixels(&self) -> usize {
+        self.rise.rise_k.len()
+    }
+
+    /// Pixel `p`'s entries.
+    fn entries(&self, p: usize) -> &[(u32, f64)] {
+        &self.rise.entries[self.rise.starts[p] as usize..self.rise.starts[p + 1] as usize]
+    }
+
+    /// Pixel `p`'s importance weight.
+    fn weight(&self, p: usize) -> f64 {
+        self.rise.weight.map_or(1.0, |w| w[p])
+    }
+
+    /// Pixel `p`'s object.
+    fn object(&self, p: usize) -> usize {
+        self.rise.object[p] as usize
+    }
+
+    /// Pixel `p`'s `Σ_e w_e o_e (β_e · v)` for per-region values `v`: its covered share
+    /// weighted by `v` (the prediction for `v` = the contrasts, before reflectance).
+    fn covered(&self, p: usize, v: &[f64; REGIONS]) -> f64 {
+        self.entries(p)
+            .iter()
+            .map(|&(i, w)| {
+                let i = i as usize;
+                w * self.occ[i] * self.mix[i].iter().zip(v).map(|(b, c)| b * c).sum::<f64>()
+            })
+            .sum()
+    }
 }
 
 /// Golden-section steps of the offset per IRLS round: the range (±2.5 K) shrinks to 1e-5 K.
@@ -281,8 +341,7 @@ impl Radiometry {
     ) {
         let inv_var = 1.0 / (self.noise_k * self.noise_k);
         let delta = cfg.huber_sigmas;
-        let w = |i: usize| input.weight.map_or(1.0, |w| w[i]);
-        let n = input.occ.len();
+        let n = input.pixels();
         let [gm, gs] = cfg.reflectance_prior;
         let b = cfg.reflectance_bound_sigmas * gs;
         let (g_lo, g_hi) = ((gm - b).max(1e-3), gm + b);
@@ -290,49 +349,40 @@ impl Radiometry {
             input.share / (gs * gs),
             input.share / (cfg.offset_sigma_k * cfg.offset_sigma_k),
         );
-        // Per ray: Σ β a and Σ β b (the contrast is their combination at Δ).
-        let (ma, mb): (Vec<f64>, Vec<f64>) = input
-            .mix
-            .iter()
-            .map(|m| {
-                m.iter()
-                    .zip(&self.contrast_at)
-                    .fold((0.0, 0.0), |(x, y), (beta, [ca, cb])| {
-                        (x + beta * ca, y + beta * cb)
-                    })
-            })
-            .unzip();
+        // Per pixel: the covered footprint weighted by a and by b (the prediction before
+        // reflectance is their combination at Δ), and the object.
+        let ca = self.contrast_at.map(|[a, _]| a);
+        let cb = self.contrast_at.map(|[_, b]| b);
+        let ma: Vec<f64> = (0..n).map(|p| input.covered(p, &ca)).collect();
+        let mb: Vec<f64> = (0..n).map(|p| input.covered(p, &cb)).collect();
+        let obj: Vec<usize> = (0..n).map(|p| input.object(p)).collect();
         let mut a = vec![0.0; n];
         let mut g = s.reflectance.clone();
         // The weighted least squares at offset `d` with the best reflectances (written to `g`).
         let profile = |d: f64, a: &[f64], g: &mut [f64]| -> f64 {
             let (mut num, mut den) = (vec![0.0; self.objects], vec![0.0; self.objects]);
-            for i in 0..n {
-                let x = input.occ[i] * (ma[i] + mb[i] * d);
-                let k = input.object[i] as usize;
-                num[k] += a[i] * x * input.rise_k[i];
-                den[k] += a[i] * x * x;
+            for p in 0..n {
+                let x = ma[p] + mb[p] * d;
+                num[obj[p]] += a[p] * x * input.rise.rise_k[p];
+                den[obj[p]] += a[p] * x * x;
             }
             for k in 0..self.objects {
                 g[k] = ((num[k] + p_g * gm) / (den[k] + p_g)).clamp(g_lo, g_hi);
             }
             let mut f = 0.0;
-            for i in 0..n {
-                let r = input.rise_k[i]
-                    - g[input.object[i] as usize] * input.occ[i] * (ma[i] + mb[i] * d);
-                f += a[i] * r * r;
+            for p in 0..n {
+                let r = input.rise.rise_k[p] - g[obj[p]] * (ma[p] + mb[p] * d);
+                f += a[p] * r * r;
             }
             let pg: f64 = g.iter().map(|x| p_g * (x - gm) * (x - gm)).sum();
             0.5 * (f + pg + p_d * d * d)
         };
         for _ in 0..sweeps {
-            // IRLS weight of each ray at the current scalars (1 inside Huber's threshold).
-            for (i, ai) in a.iter_mut().enumerate() {
-                let pred = s.reflectance[input.object[i] as usize]
-                    * input.occ[i]
-                    * (ma[i] + mb[i] * s.offset_k);
-                let r = (input.rise_k[i] - pred) / self.noise_k;
-                *ai = w(i)
+            // IRLS weight of each pixel at the current scalars (1 inside Huber's threshold).
+            for (p, ap) in a.iter_mut().enumerate() {
+                let pred = s.reflectance[obj[p]] * (ma[p] + mb[p] * s.offset_k);
+                let r = (input.rise.rise_k[p] - pred) / self.noise_k;
+                *ap = input.weight(p)
                     * inv_var
                     * if r.abs() <= delta {
                         1.0
@@ -370,7 +420,16 @@ impl Radiometry {
         }
     }
 
-    /// `D` at fixed scalars; with `grad`, writes `∂D/∂o_i` and `∂D/∂β_i` there (length of the
+    /// The predicted rise per pixel of `input` at scalars `s`.
+    pub fn predict<'a>(
+        &'a self,
+        input: &'a TermInput<'_>,
+        s: &'a Scalars,
+    ) -> impl Iterator<Item = f64> + 'a {
+        (0..input.pixels()).map(|p| s.reflectance[input.object(p)] * input.covered(p, &s.contrast))
+    }
+
+    /// `D` at fixed scalars; with `grad`, writes `∂D/∂o_i` and `∂D/∂β_i` there (per ray of the
     /// batch).
     pub fn loss(
         &self,
@@ -381,39 +440,42 @@ impl Radiometry {
     ) -> f64 {
         let delta = cfg.huber_sigmas;
         let sigma = self.noise_k;
-        let w = |i: usize| input.weight.map_or(1.0, |w| w[i]);
-        let n = input.occ.len();
+        let n = input.pixels();
         // What noise alone scores (E ψ(z), z ~ N(0, 1), per unit weight), removed from both
         // sides: on a car door 150,000 pixels of noise would otherwise bury 2,000 of signal,
         // and the priors of the body would outweigh the data.
-        let floor = huber_noise_mean(delta) * (0..n).map(w).sum::<f64>();
+        let floor = huber_noise_mean(delta) * (0..n).map(|p| input.weight(p)).sum::<f64>();
         let nobody = (0..n)
-            .map(|i| w(i) * huber(input.rise_k[i] / sigma, delta).0)
+            .map(|p| input.weight(p) * huber(input.rise.rise_k[p] / sigma, delta).0)
             .sum::<f64>();
         let norm = (nobody - floor).max(MIN_SIGNAL_SHARE * nobody).max(1e-12);
         let mut data = 0.0;
         let mut grad = grad;
         if let Some((d_occ, d_mix)) = grad.as_mut() {
             d_occ.clear();
-            d_occ.resize(n, 0.0);
+            d_occ.resize(input.occ.len(), 0.0);
             d_mix.clear();
-            d_mix.resize(n, [0.0; REGIONS]);
+            d_mix.resize(input.occ.len(), [0.0; REGIONS]);
         }
-        for i in 0..n {
-            let g = s.reflectance[input.object[i] as usize];
-            let c: f64 = input.mix[i]
-                .iter()
-                .zip(&s.contrast)
-                .map(|(b, c)| b * c)
-                .sum();
-            let (psi, dpsi) = huber((input.rise_k[i] - g * c * input.occ[i]) / sigma, delta);
-            data += w(i) * psi;
+        for p in 0..n {
+            let g = s.reflectance[input.object(p)];
+            let pred = g * input.covered(p, &s.contrast);
+            let (psi, dpsi) = huber((input.rise.rise_k[p] - pred) / sigma, delta);
+            data += input.weight(p) * psi;
             if let Some((d_occ, d_mix)) = grad.as_mut() {
-                // ∂D/∂ŷ_i; ŷ = g o (β · c).
-                let dy = -w(i) * dpsi / sigma / norm;
-                d_occ[i] = dy * g * c;
-                for r in 0..REGIONS {
-                    d_mix[i][r] = dy * g * input.occ[i] * s.contrast[r];
+                // ∂D/∂ŷ_p, times ∂ŷ_p/∂(o_e, β_e); ŷ_p = g Σ_e w_e o_e (β_e · c).
+                let dy = -input.weight(p) * dpsi / sigma / norm * g;
+                for &(i, w) in input.entries(p) {
+                    let i = i as usize;
+                    let c: f64 = input.mix[i]
+                        .iter()
+                        .zip(&s.contrast)
+                        .map(|(b, c)| b * c)
+                        .sum();
+                    d_occ[i] += dy * w * c;
+                    for r in 0..REGIONS {
+                        d_mix[i][r] += dy * w * input.occ[i] * s.contrast[r];
+                    }
                 }
             }
         }
@@ -426,15 +488,37 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// A small synthetic problem: two objects, every region, rises drawn from known scalars.
-    type Synthetic = (
-        Radiometry,
-        Vec<f64>,
-        Vec<f64>,
-        Vec<[f64; REGIONS]>,
-        Vec<u16>,
-        Scalars,
-    );
+    /// A small synthetic problem: two objects, every region, pixels of 1–4 rays of their own
+    /// and one of their neighbour's, rises drawn from known scalars.
+    struct Synthetic {
+        rad: Radiometry,
+        occ: Vec<f64>,
+        region: Vec<[f64; REGIONS]>,
+        truth: Scalars,
+    }
+
+    impl Synthetic {
+        /// The term's input with per-pixel `rise` and `weight`, per-ray `occ` and `mix`.
+        fn input<'a>(
+            &'a self,
+            occ: &'a [f64],
+            mix: &'a [[f64; REGIONS]],
+            rise: &'a [f64],
+            weight: Option<&'a [f64]>,
+            share: f64,
+        ) -> TermInput<'a> {
+            TermInput {
+                occ,
+                mix,
+                rise: Rise {
+                    rise_k: rise,
+                    weight,
+                    ..self.rad.rise()
+                },
+                share,
+            }
+        }
+    }
 
     /// One-hot shares, every fifth ray on a border between two regions.
     fn mix_of(i: usize) -> [f64; REGIONS] {
@@ -450,7 +534,22 @@ mod tests {
 
     fn synthetic(noise: f64) -> Synthetic {
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
-        let n = 400;
+        let pixels = 250;
+        // Pixel p's own rays (1–4 of a 4-node footprint), then the previous pixel's first ray
+        // through a point spread: rays shared by two pixels.
+        let mut own = vec![0u32];
+        for p in 0..pixels {
+            own.push(own[p] + 1 + (p % 4) as u32);
+        }
+        let n = own[pixels] as usize;
+        let (mut starts, mut entries) = (vec![0u32], Vec::new());
+        for p in 0..pixels {
+            entries.extend((own[p]..own[p + 1]).map(|i| (i, 0.2)));
+            if p > 0 {
+                entries.push((own[p - 1], 0.1));
+            }
+            starts.push(entries.len() as u32);
+        }
         let contrast_at = [[7.5, 0.7], [10.5, 0.8], [11.5, 0.8], [8.5, 0.75]];
         let offset_k = 1.2;
         let truth = Scalars {
@@ -468,20 +567,31 @@ mod tests {
             })
             .collect();
         let region: Vec<[f64; REGIONS]> = (0..n).map(mix_of).collect();
-        let object: Vec<u16> = (0..n).map(|i| (i / 7 % 2) as u16).collect();
-        let rise: Vec<f64> = (0..n)
-            .map(|i| {
-                let c: f64 = region[i]
+        let object: Vec<u16> = (0..pixels).map(|p| (p / 7 % 2) as u16).collect();
+        let rise: Vec<f64> = (0..pixels)
+            .map(|p| {
+                let covered: f64 = entries[starts[p] as usize..starts[p + 1] as usize]
                     .iter()
-                    .zip(&truth.contrast)
-                    .map(|(b, c)| b * c)
+                    .map(|&(i, w)| {
+                        let i = i as usize;
+                        let c: f64 = region[i]
+                            .iter()
+                            .zip(&truth.contrast)
+                            .map(|(b, c)| b * c)
+                            .sum();
+                        w * c * occ[i]
+                    })
                     .sum();
-                truth.reflectance[object[i] as usize] * c * occ[i]
+                truth.reflectance[object[p] as usize] * covered
                     + noise * rng.random_range(-1.0..1.0)
             })
             .collect();
         let rad = Radiometry {
-            rise_k: rise.clone(),
+            pixel: (0..pixels as u32).collect(),
+            rise_k: rise,
+            object,
+            starts,
+            entries,
             noise_k: 0.05,
             ambient_k: 295.0,
             objects: 2,
@@ -489,59 +599,52 @@ mod tests {
             vertex_region: vec![],
             triangle_region: vec![],
         };
-        (rad, occ, rise, region, object, truth)
+        Synthetic {
+            rad,
+            occ,
+            region,
+            truth,
+        }
     }
 
     /// `∂D/∂o` and `∂D/∂β` at fixed scalars against central differences (f64), with Huber's
     /// linear branch active on some rays.
     #[test]
     fn loss_gradient_matches_finite_differences() {
-        let (rad, occ, rise, region, object, _) = synthetic(0.02);
+        let sy = synthetic(0.02);
+        let (rad, occ, region) = (&sy.rad, &sy.occ, &sy.region);
+        let rise = &rad.rise_k;
         let cfg = RadiometricConfig::default();
-        let weight: Vec<f64> = (0..occ.len()).map(|i| 1.0 + (i % 5) as f64 * 0.3).collect();
+        let weight: Vec<f64> = (0..rise.len())
+            .map(|p| 1.0 + (p % 5) as f64 * 0.3)
+            .collect();
         // Scalars off the truth: large residuals reach Huber's linear branch.
         let s = Scalars {
-            reflectance: vec![0.12, 0.03],
+            reflectance: vec![0.2, 0.005],
             offset_k: -2.0,
             contrast: [6.0, 9.0, 14.0, 5.0],
         };
         let input = |o: &[f64], mix: &[[f64; REGIONS]]| -> f64 {
-            let t = TermInput {
-                occ: o,
-                rise_k: &rise,
-                mix,
-                object: &object,
-                weight: Some(&weight),
-                share: 0.4,
-            };
-            rad.loss(&t, &cfg, &s, None)
+            rad.loss(&sy.input(o, mix, rise, Some(&weight), 0.4), &cfg, &s, None)
         };
         let (mut d, mut dm) = (Vec::new(), Vec::new());
-        let t = TermInput {
-            occ: &occ,
-            rise_k: &rise,
-            mix: &region,
-            object: &object,
-            weight: Some(&weight),
-            share: 0.4,
-        };
+        let t = sy.input(occ, region, rise, Some(&weight), 0.4);
         let l = rad.loss(&t, &cfg, &s, Some((&mut d, &mut dm)));
-        assert!((l - input(&occ, &region)).abs() < 1e-15);
-        let linear = (0..occ.len())
-            .filter(|&i| {
-                let c: f64 = region[i].iter().zip(&s.contrast).map(|(b, c)| b * c).sum();
-                let p = s.reflectance[object[i] as usize] * c * occ[i];
-                ((rise[i] - p) / rad.noise_k).abs() > cfg.huber_sigmas
+        assert!((l - input(occ, region)).abs() < 1e-15);
+        let linear = (0..t.pixels())
+            .filter(|&p| {
+                let pred = s.reflectance[t.object(p)] * t.covered(p, &s.contrast);
+                ((rise[p] - pred) / rad.noise_k).abs() > cfg.huber_sigmas
             })
             .count();
-        assert!(linear > 10, "only {linear} rays on Huber's linear branch");
+        assert!(linear > 10, "only {linear} pixels on Huber's linear branch");
         let dmax = d.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         for i in (0..occ.len()).step_by(7) {
             let h = 1e-6;
             let (mut p, mut m) = (occ.clone(), occ.clone());
             p[i] += h;
             m[i] -= h;
-            let fd = (input(&p, &region) - input(&m, &region)) / (2.0 * h);
+            let fd = (input(&p, region) - input(&m, region)) / (2.0 * h);
             assert!(
                 (fd - d[i]).abs() <= 1e-6 * dmax,
                 "ray {i}: {fd} vs {}",
@@ -551,7 +654,7 @@ mod tests {
                 let (mut p, mut m) = (region.clone(), region.clone());
                 p[i][r] += h;
                 m[i][r] -= h;
-                let fd = (input(&occ, &p) - input(&occ, &m)) / (2.0 * h);
+                let fd = (input(occ, &p) - input(occ, &m)) / (2.0 * h);
                 assert!(
                     (fd - dm[i][r]).abs() <= 1e-6 * dmax.max(1e-3),
                     "ray {i} region {r}: {fd} vs {}",
@@ -562,20 +665,14 @@ mod tests {
     }
 
     /// The closed-form solve finds the scalars that made the data (noise-free, the priors
-    /// weak against 400 rays, some rays mixing two regions) — the products `g·c` and the
+    /// weak against 250 pixels, some rays mixing two regions) — the products `g·c` and the
     /// offset — and at its result no scalar can be moved to lower the objective it minimises.
     #[test]
     fn scalar_solve_recovers_the_truth_and_is_stationary() {
-        let (rad, occ, rise, region, object, truth) = synthetic(0.0);
+        let sy = synthetic(0.0);
+        let (rad, truth) = (&sy.rad, &sy.truth);
         let cfg = RadiometricConfig::default();
-        let t = TermInput {
-            occ: &occ,
-            rise_k: &rise,
-            mix: &region,
-            object: &object,
-            weight: None,
-            share: 1e-3,
-        };
+        let t = sy.input(&sy.occ, &sy.region, &rad.rise_k, None, 1e-3);
         // The product g·c is what the data fix; the priors fix the split. Compare products.
         let mut s = rad.prior_scalars(&cfg);
         rad.solve_scalars(&t, &cfg, &mut s, 200);
@@ -620,17 +717,11 @@ mod tests {
     /// person cools by at most the offset's bound, no object stops reflecting.
     #[test]
     fn scalars_stay_within_their_bounds() {
-        let (rad, occ, _, region, object, _) = synthetic(0.0);
+        let sy = synthetic(0.0);
+        let rad = &sy.rad;
         let cfg = RadiometricConfig::default();
-        let zero = vec![0.0; occ.len()];
-        let t = TermInput {
-            occ: &occ,
-            rise_k: &zero,
-            mix: &region,
-            object: &object,
-            weight: None,
-            share: 1e-3,
-        };
+        let zero = vec![0.0; rad.rise_k.len()];
+        let t = sy.input(&sy.occ, &sy.region, &zero, None, 1e-3);
         let mut s = rad.prior_scalars(&cfg);
         rad.solve_scalars(&t, &cfg, &mut s, 20);
         assert_eq!(s.offset_k, -cfg.offset_bound_k);

@@ -26,6 +26,7 @@
 //!    each (turned 180° about the up axis through the root): both run the full schedule (edge
 //!    sampling, σ annealed to `sigma_m2[1]`), and are ranked on all rays.
 
+use super::observe::Selection;
 use super::problem::{Draw, Scratch};
 use super::{
     Batch, FittedRadiometry, HumanConfig, HumanFit, HumanProblem, HumanState, Hypothesis,
@@ -118,10 +119,18 @@ impl HumanProblem<'_> {
     /// (at most half the batch) and uniformly drawn others, each stratum weighted by its
     /// inverse sampling rate. A uniform draw would see a few dozen mask rays on a car door
     /// (a 2,500-pixel reflection among 150,000 object pixels), too few to rank candidates.
-    pub fn stratified_batch(&self, n: usize, seed: u64) -> Stratified {
+    /// With `thermal`, the radiometric term's pixels are drawn instead (about `n` of its rays
+    /// per pixel's worth), with the rays their predictions weigh.
+    pub fn stratified_batch(&self, n: usize, seed: u64, thermal: bool) -> Stratified {
         let target_all = self.targets();
-        let (pos, neg): (Vec<usize>, Vec<usize>) =
-            (0..self.rays.len()).partition(|&i| target_all[i] > 0.5);
+        let rad = self.radiometry.filter(|_| thermal);
+        let units = rad.map_or(self.rays.len(), |r| r.pixels());
+        let in_mask = |u: usize| match rad {
+            Some(r) => self.mask.data[r.pixel[u] as usize],
+            None => target_all[u] > 0.5,
+        };
+        let n = (n * units).div_ceil(self.rays.len().max(1));
+        let (pos, neg): (Vec<usize>, Vec<usize>) = (0..units).partition(|&u| in_mask(u));
         let mut rng = irmirror_geom::rng::seeded(seed, 41);
         let n_pos = pos.len().min(n.div_ceil(2));
         let n_neg = neg.len().min(n.saturating_sub(n_pos).max(1));
@@ -137,16 +146,29 @@ impl HumanProblem<'_> {
         chosen.extend(pick(&pos, n_pos).into_iter().map(|i| (i, w_pos)));
         chosen.extend(pick(&neg, n_neg).into_iter().map(|i| (i, w_neg)));
         chosen.sort_unstable_by_key(|c| c.0);
-        let idx: Vec<usize> = chosen.iter().map(|c| c.0).collect();
+        let picked: Vec<usize> = chosen.iter().map(|c| c.0).collect();
+        let unit_weight: Vec<f64> = chosen.iter().map(|c| c.1).collect();
+        let mut selection = Selection::default();
+        let (idx, weight) = match rad {
+            Some(r) => {
+                r.select(&picked, &mut selection);
+                // A ray weighs what the first pixel that needs it does.
+                let w = selection
+                    .owner
+                    .iter()
+                    .map(|&k| unit_weight[k as usize])
+                    .collect();
+                (selection.rays.clone(), w)
+            }
+            None => (picked, unit_weight.clone()),
+        };
         let mut rays = ReflectedRays::default();
         self.rays.select_into(&idx, &mut rays);
         Stratified {
             rays,
             target: idx.iter().map(|&i| target_all[i]).collect(),
-            weight: chosen.iter().map(|c| c.1).collect(),
-            rise_k: self
-                .radiometry
-                .map(|r| idx.iter().map(|&i| r.rise_k[i]).collect()),
+            weight,
+            rise: rad.map(|_| (selection, unit_weight)),
         }
     }
 
@@ -251,13 +273,17 @@ impl HumanProblem<'_> {
         seed: u64,
     ) -> Result<Vec<HumanState>, ReconError> {
         let s = &cfg.search;
-        let sample = self.stratified_batch(s.score_rays, seed);
+        let thermal = self.radiometric(cfg).is_some();
+        let sample = self.stratified_batch(s.score_rays, seed, thermal);
         let batch = Batch {
             rays: &sample.rays,
             target: &sample.target,
             weight: Some(&sample.weight),
             // The rounds rank on the thermal rise when that term is on.
-            rise_k: sample.rise_k.as_deref().filter(|_| cfg.radiometric.enabled),
+            rise: sample
+                .rise
+                .as_ref()
+                .map(|(sel, weight)| sel.rise(Some(weight))),
             sigma_m2: s.round_sigma_m2[1],
         };
         let t0 = std::time::Instant::now();
@@ -267,7 +293,7 @@ impl HumanProblem<'_> {
         // it is 288 forward passes).
         let coarse = Batch {
             sigma_m2: s.screen_sigma_m2,
-            rise_k: None,
+            rise: None,
             ..batch
         };
         let mut scored: Vec<(f64, HumanState)> = candidates
@@ -403,8 +429,8 @@ pub struct Stratified {
     pub target: Vec<f64>,
     /// Their importance weights.
     pub weight: Vec<f64>,
-    /// Their thermal rise, K (when the problem has the radiometry).
-    pub rise_k: Option<Vec<f64>>,
+    /// The radiometric term's pixels with their importance weights (a thermal batch).
+    pub rise: Option<(Selection, Vec<f64>)>,
 }
 
 /// Fits the person: global search, every survivor refined in parallel, best first, its

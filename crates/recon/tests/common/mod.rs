@@ -70,6 +70,32 @@ pub fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> Refle
     irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
 }
 
+/// [`true_object_rays`] sampling each pixel's footprint (4 rays per pixel), as stage 2's
+/// radiometric term sees a capture.
+pub fn true_object_footprint_rays(
+    sc: &SceneFile,
+    sim: &irmirror_sim::Simulation,
+) -> ReflectedRays<f64> {
+    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc
+        .objects
+        .iter()
+        .zip(&sim.object_poses)
+        .map(|(o, p)| irmirror_render::sdf::PlacedSdf {
+            sdf: o.shape.sdf(),
+            depth_from_object: *p,
+        })
+        .collect();
+    let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
+    let all = irmirror_recon::pipeline::footprint_rays(
+        &sc.thermal_camera.intrinsics,
+        &dft,
+        &objs,
+        &Default::default(),
+        irmirror_render::reflect::Normals::Raw,
+    );
+    irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
+}
+
 /// Stage 2's problem on a simulated capture: the person seen through `rays`, facing the first
 /// object, with `mask` and the floor given.
 pub fn problem_for<'a>(
