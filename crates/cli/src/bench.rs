@@ -13,7 +13,8 @@ pub enum BenchCommand {
     /// Reflection renderer: one forward + backward of the soft-IoU loss on the reference scene,
     /// dense (every reflected ray × every triangle) and fast (BVH-culled), in one run.
     Render {
-        /// The benchmark scene (DESIGN.md §7).
+        /// The benchmark scene (JSON; the project's reference scene lies in `shared/bench/` beside
+        /// the repository, see BENCHMARKS.md).
         #[arg(long, default_value = "../shared/bench/scene_sphere160.json")]
         scene: PathBuf,
         /// Timed repetitions of the fast path (the median is reported).

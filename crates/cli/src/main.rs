@@ -76,7 +76,7 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
-    /// Reconstruct objects and the person from a capture (the pipeline of DESIGN.md §1).
+    /// Reconstruct objects and the person from a capture (stages 0–2; README, "Reconstruction").
     ///
     /// Stage 0 finds the thermal reflection, stage 1 fits each object's shape prior to the depth
     /// (support plane, masks or segmentation), stage 2 fits the body to the reflection from

@@ -185,7 +185,7 @@ pub fn run(
             for (k, o) in objs.objects.iter().enumerate() {
                 let t = o.depth_from_object.translation;
                 println!(
-                    "object {k}: {:?} at ({:.3}, {:.3}, {:.3}) m, scale {:.3} m, mean surface error {:.1} mm",
+                    "object {k}: {} at ({:.3}, {:.3}, {:.3}) m, scale {:.3} m, mean surface error {:.1} mm",
                     o.shape,
                     t.x,
                     t.y,
@@ -244,7 +244,7 @@ pub fn print_summary(rec: &Reconstruction) {
     );
     for (k, o) in rec.objects.objects.iter().enumerate() {
         println!(
-            "stage 1: object {k}: {:?}, scale {:.3} m, mean surface error {:.1} mm",
+            "stage 1: object {k}: {}, scale {:.3} m, mean surface error {:.1} mm",
             o.shape,
             o.depth_from_object.scale,
             o.mean_surface_error_m * 1e3

@@ -268,7 +268,7 @@ pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> 
     for (k, o) in rec.objects.objects.iter().enumerate() {
         let t = o.depth_from_object.translation;
         s += &format!(
-            "<tr><td>{k}</td><td>{}</td><td>{:?}</td><td>({:.3}, {:.3}, {:.3})</td><td>{:.3}</td><td>{:.1} mm</td><td>{}</td></tr>",
+            "<tr><td>{k}</td><td>{}</td><td>{}</td><td>({:.3}, {:.3}, {:.3})</td><td>{:.3}</td><td>{:.1} mm</td><td>{}</td></tr>",
             o.category,
             o.shape,
             t.x,

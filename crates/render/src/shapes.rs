@@ -37,6 +37,27 @@ pub enum Shape {
     },
 }
 
+/// In words, for logs and reports: `bowl (rim 0.12 above the centre, wall 0.07)`.
+impl std::fmt::Display for Shape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Shape::Sphere => write!(f, "sphere"),
+            Shape::Bowl { cut, wall } => write!(
+                f,
+                "bowl (rim {cut:+.2} above the centre, wall {wall:.3}, in shell radii)"
+            ),
+            Shape::Mug { aspect, wall } => write!(
+                f,
+                "mug (height {aspect:.2} × the diameter, wall {wall:.3} of the radius)"
+            ),
+            Shape::Car { cabin, height } => write!(
+                f,
+                "car (cabin {cabin:.2} of the length, height {height:.2} × the length)"
+            ),
+        }
+    }
+}
+
 impl Shape {
     /// The category.
     pub fn category(&self) -> Category {
@@ -165,6 +186,26 @@ impl Sdf for Car {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Logs and reports show a shape in words with its parameters, not Rust's debug syntax.
+    #[test]
+    fn shapes_read_as_words() {
+        let m = Shape::Mug {
+            aspect: 1.1971,
+            wall: 0.1246,
+        }
+        .to_string();
+        assert_eq!(
+            m,
+            "mug (height 1.20 × the diameter, wall 0.125 of the radius)"
+        );
+        let b = Shape::Bowl {
+            cut: -0.1153,
+            wall: 0.068,
+        }
+        .to_string();
+        assert!(b.starts_with("bowl (rim -0.12") && !b.contains('{'), "{b}");
+    }
 
     #[test]
     fn shapes_fit_the_unit_sphere_and_stand_on_their_base() {
