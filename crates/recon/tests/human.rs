@@ -182,18 +182,13 @@ fn stage2_fd_worst(radiometric: bool) -> f64 {
             })
             .collect(),
     };
-    let pre = irmirror_recon::preprocess::Preprocessed {
-        rise_k: rise,
-        object_pixels: irmirror_capture::Image::filled(with.width, with.height, true),
-        raw_mask: sim.reflection_mask.clone(),
-        mask: sim.reflection_mask.clone(),
-        edges: sim.reflection_mask.clone(),
-        threshold_k: 0.1,
-        noise_k: 0.05,
-        background_k: Some(sc.ambient_c + irmirror_capture::planck::ZERO_C_K),
-        // The simulator's optics: the term convolves the footprints with it.
-        psf_sigma_px: sc.sensor.blur_px,
-    };
+    // The simulator's optics: the term convolves the footprints with it.
+    let pre = preprocessed(
+        &sim,
+        rise,
+        Some(sc.ambient_c + irmirror_capture::planck::ZERO_C_K),
+        sc.sensor.blur_px,
+    );
     let rad = radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
     if radiometric {
         problem.radiometry = Some(&rad);

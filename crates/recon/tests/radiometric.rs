@@ -6,7 +6,6 @@ mod common;
 use common::*;
 use irmirror_sim::scene::ThermalPreset;
 use irmirror_sim::simulate;
-use nalgebra::Vector3;
 
 /// The radiometric observation model against the simulator's physics (closed form): where a
 /// reflected ray of the true car meets the true body inside a region, the noise-free rise the
@@ -16,7 +15,6 @@ use nalgebra::Vector3;
 #[test]
 fn radiometric_model_matches_the_simulated_rise() {
     use irmirror_body::Region;
-    use irmirror_body::regions::{triangle_regions, vertex_regions};
     use irmirror_capture::planck::{ZERO_C_K, temperature_of};
     use irmirror_recon::human::radiometric::contrast_k;
     // A Boson-like car capture: enough interior pixels on face, skin and hair too.
@@ -24,16 +22,8 @@ fn radiometric_model_matches_the_simulated_rise() {
     let sim = simulate(model(), &sc, 1).unwrap();
     let rays = true_object_rays(&sc, &sim);
     let (with, without) = &sim.radiance;
-    let verts: Vec<Vector3<f64>> = sim
-        .body
-        .mesh
-        .vertices
-        .iter()
-        .map(|v| Vector3::from(v.map(f64::from)))
-        .collect();
+    let (verts, bvh, regions) = true_body(&sim);
     let tris = &model().asset.faces;
-    let bvh = irmirror_render::Bvh::build(&verts, tris);
-    let regions = triangle_regions(&vertex_regions(model()).unwrap(), tris);
     let ambient_k = sc.ambient_c + ZERO_C_K;
     let reflectance = 1.0 - sc.objects[0].emissivity;
     let (w, h) = (rays.width as i64, rays.height as i64);
@@ -86,23 +76,14 @@ fn radiometric_model_matches_the_simulated_rise() {
 /// than by one ray at each pixel's centre, edges and thin limbs included.
 #[test]
 fn footprint_model_predicts_the_rendered_rise_of_every_pixel() {
-    use irmirror_body::regions::{triangle_regions, vertex_regions};
     use irmirror_capture::planck::{ZERO_C_K, temperature_of};
     use irmirror_recon::human::radiometric::{Radiometry, contrast_k};
     let sc = scene_with(2, true, ThermalPreset::Lepton);
     let sim = simulate(model(), &sc, 2).unwrap();
     let blur = sc.sensor.blur_px;
     assert!(blur > 0.0);
-    let verts: Vec<Vector3<f64>> = sim
-        .body
-        .mesh
-        .vertices
-        .iter()
-        .map(|v| Vector3::from(v.map(f64::from)))
-        .collect();
+    let (verts, bvh, regions) = true_body(&sim);
     let tris = &model().asset.faces;
-    let bvh = irmirror_render::Bvh::build(&verts, tris);
-    let regions = triangle_regions(&vertex_regions(model()).unwrap(), tris);
     let ambient_k = sc.ambient_c + ZERO_C_K;
     let (with, without) = &sim.radiance;
     let (bw, bo) = (
@@ -119,17 +100,12 @@ fn footprint_model_predicts_the_rendered_rise_of_every_pixel() {
     // The term's pixels and operator for `rays`; per pixel Σ_e w_e (1 − ε_object) c_region(e)
     // over the entries whose ray meets the body.
     let predict = |rays: &irmirror_render::ReflectedRays<f64>, psf: f64| {
-        let pre = irmirror_recon::preprocess::Preprocessed {
-            rise_k: irmirror_capture::Image::filled(w, h, 0.0),
-            object_pixels: irmirror_capture::Image::filled(w, h, true),
-            raw_mask: sim.reflection_mask.clone(),
-            mask: sim.reflection_mask.clone(),
-            edges: sim.reflection_mask.clone(),
-            threshold_k: 0.1,
-            noise_k: 0.05,
-            background_k: Some(ambient_k),
-            psf_sigma_px: psf,
-        };
+        let pre = preprocessed(
+            &sim,
+            irmirror_capture::Image::filled(w, h, 0.0),
+            Some(ambient_k),
+            psf,
+        );
         let rad = Radiometry::new(&pre, rays, model()).unwrap();
         let ray_rise: Vec<f64> = (0..rays.len())
             .map(|i| {
@@ -188,17 +164,7 @@ fn without_background_frames_stage_2_fits_the_mask_and_says_why() {
     use irmirror_recon::pipeline::{Ablation, ReconConfig, radiometry};
     let (_, sim, rays) = car_capture(1);
     let (w, h) = (sim.reflection_mask.width, sim.reflection_mask.height);
-    let mut pre = irmirror_recon::preprocess::Preprocessed {
-        rise_k: irmirror_capture::Image::filled(w, h, 0.0),
-        object_pixels: irmirror_capture::Image::filled(w, h, true),
-        raw_mask: sim.reflection_mask.clone(),
-        mask: sim.reflection_mask.clone(),
-        edges: sim.reflection_mask.clone(),
-        threshold_k: 0.1,
-        noise_k: 0.05,
-        background_k: None,
-        psf_sigma_px: 0.0,
-    };
+    let mut pre = preprocessed(&sim, irmirror_capture::Image::filled(w, h, 0.0), None, 0.0);
     let cfg = ReconConfig::default();
     let (rad, term) = radiometry(&pre, &rays, model(), &cfg.human_settings()).unwrap();
     assert!(rad.is_none());

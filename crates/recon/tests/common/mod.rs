@@ -48,52 +48,97 @@ pub fn car_capture(seed: u64) -> (SceneFile, irmirror_sim::Simulation, Reflected
     (sc, sim, rays)
 }
 
-/// The unoccluded reflected rays of the true objects.
-pub fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> ReflectedRays<f64> {
-    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc
-        .objects
+/// The true objects, placed.
+fn true_objects(
+    sc: &SceneFile,
+    sim: &irmirror_sim::Simulation,
+) -> Vec<irmirror_render::sdf::PlacedSdf> {
+    sc.objects
         .iter()
         .zip(&sim.object_poses)
         .map(|(o, p)| irmirror_render::sdf::PlacedSdf {
             sdf: o.shape.sdf(),
             depth_from_object: *p,
         })
-        .collect();
-    let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
-    let all = irmirror_render::reflect::reflect_camera(
-        &sc.thermal_camera.intrinsics,
-        &dft,
-        &objs,
-        &Default::default(),
-        irmirror_render::reflect::Normals::Raw,
-    );
-    irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
+        .collect()
+}
+
+/// The unoccluded reflected rays of the true objects, one per pixel centre.
+pub fn true_object_rays(sc: &SceneFile, sim: &irmirror_sim::Simulation) -> ReflectedRays<f64> {
+    true_rays(sc, sim, false)
 }
 
 /// [`true_object_rays`] sampling each pixel's footprint (4 rays per pixel), as stage 2's
-/// radiometric term sees a capture.
+/// radiometric term sees a small reflection.
 pub fn true_object_footprint_rays(
     sc: &SceneFile,
     sim: &irmirror_sim::Simulation,
 ) -> ReflectedRays<f64> {
-    let objs: Vec<irmirror_render::sdf::PlacedSdf> = sc
-        .objects
-        .iter()
-        .zip(&sim.object_poses)
-        .map(|(o, p)| irmirror_render::sdf::PlacedSdf {
-            sdf: o.shape.sdf(),
-            depth_from_object: *p,
-        })
-        .collect();
+    true_rays(sc, sim, true)
+}
+
+fn true_rays(
+    sc: &SceneFile,
+    sim: &irmirror_sim::Simulation,
+    footprint: bool,
+) -> ReflectedRays<f64> {
+    let objs = true_objects(sc, sim);
     let dft = sc.thermal_camera.depth_from_thermal.to_rigid().unwrap();
-    let all = irmirror_recon::pipeline::footprint_rays(
+    let (cam, trace, normals) = (
         &sc.thermal_camera.intrinsics,
-        &dft,
-        &objs,
-        &Default::default(),
+        Default::default(),
         irmirror_render::reflect::Normals::Raw,
     );
+    let all = if footprint {
+        irmirror_recon::pipeline::footprint_rays(cam, &dft, &objs, &trace, normals)
+    } else {
+        irmirror_render::reflect::reflect_camera(cam, &dft, &objs, &trace, normals)
+    };
     irmirror_recon::pipeline::unblocked(&all, &objs, None, &Default::default())
+}
+
+/// Stage 0's products as a test hands them over: the simulator's reflection mask, every pixel
+/// on an object, a 50 mK noise.
+pub fn preprocessed(
+    sim: &irmirror_sim::Simulation,
+    rise_k: irmirror_capture::Image<f64>,
+    background_k: Option<f64>,
+    psf_sigma_px: f64,
+) -> irmirror_recon::preprocess::Preprocessed {
+    let (w, h) = (rise_k.width, rise_k.height);
+    irmirror_recon::preprocess::Preprocessed {
+        rise_k,
+        object_pixels: irmirror_capture::Image::filled(w, h, true),
+        raw_mask: sim.reflection_mask.clone(),
+        mask: sim.reflection_mask.clone(),
+        edges: sim.reflection_mask.clone(),
+        threshold_k: 0.1,
+        noise_k: 0.05,
+        background_k,
+        psf_sigma_px,
+    }
+}
+
+/// The true body (depth frame), its BVH and the region of each triangle.
+pub fn true_body(
+    sim: &irmirror_sim::Simulation,
+) -> (
+    Vec<Vector3<f64>>,
+    irmirror_render::Bvh<f64>,
+    Vec<irmirror_body::Region>,
+) {
+    use irmirror_body::regions::{triangle_regions, vertex_regions};
+    let verts: Vec<Vector3<f64>> = sim
+        .body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect();
+    let tris = &model().asset.faces;
+    let bvh = irmirror_render::Bvh::build(&verts, tris);
+    let regions = triangle_regions(&vertex_regions(model()).unwrap(), tris);
+    (verts, bvh, regions)
 }
 
 /// Stage 2's problem on a simulated capture: the person seen through `rays`, facing the first
