@@ -167,15 +167,6 @@ impl Radiometry {
     /// `pixels` (indices of this term's pixels), in that order, and every ray their
     /// predictions weigh, into `out`.
     pub fn select(&self, pixels: &[usize], out: &mut Selection) {
-        let n_rays = self
-            .entries
-            .iter()
-            .map(|e| e.0 as usize + 1)
-            .max()
-            .unwrap_or(0);
-        if out.slot.len() < n_rays {
-            out.slot.resize(n_rays, u32::MAX);
-        }
         for &r in &out.rays {
             out.slot[r] = u32::MAX;
         }
@@ -188,6 +179,10 @@ impl Radiometry {
         out.starts.push(0);
         for (k, &p) in pixels.iter().enumerate() {
             for &(r, w) in &self.entries[self.starts[p] as usize..self.starts[p + 1] as usize] {
+                // Grown on demand: a scan of every entry per draw would cost more than the draw.
+                if r as usize >= out.slot.len() {
+                    out.slot.resize(r as usize + 1, u32::MAX);
+                }
                 let slot = &mut out.slot[r as usize];
                 if *slot == u32::MAX {
                     *slot = out.rays.len() as u32;
