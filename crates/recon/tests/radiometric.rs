@@ -182,3 +182,47 @@ fn without_background_frames_stage_2_fits_the_mask_and_says_why() {
     let (rad, term) = radiometry(&pre, &rays, model(), &ablated.human_settings()).unwrap();
     assert!(rad.is_none() && term == "mask", "{term}");
 }
+
+/// The search's thermal batch (used when the rounds rank on the rise) draws whole pixels of
+/// the observation operator: the pixels' importance weights add up to all pixels, every ray a
+/// drawn pixel needs comes along once, and each ray carries a weight.
+#[test]
+fn thermal_stratified_batch_draws_whole_pixels() {
+    use irmirror_recon::human::radiometric::Radiometry;
+    let (sc, sim, _) = car_capture(1);
+    let rays = true_object_footprint_rays(&sc, &sim);
+    let (w, h) = (rays.width, rays.height);
+    let pre = preprocessed(
+        &sim,
+        irmirror_capture::Image::filled(w, h, 0.0),
+        Some(295.0),
+        sc.sensor.blur_px,
+    );
+    let rad = Radiometry::new(&pre, &rays, model()).unwrap();
+    let mut problem = problem_for(
+        &sim,
+        &rays,
+        &sim.reflection_mask,
+        nalgebra::Vector3::z(),
+        None,
+    );
+    problem.radiometry = Some(&rad);
+    let sample = problem.stratified_batch(1200, 3, true);
+    let (sel, weight) = sample.rise.as_ref().unwrap();
+    let total: f64 = weight.iter().sum();
+    assert!(
+        (total - rad.pixels() as f64).abs() < 1e-6 * total,
+        "{total} vs {}",
+        rad.pixels()
+    );
+    assert!(weight.len() > 50 && weight.len() < rad.pixels());
+    let mut seen = sel.rays.clone();
+    seen.sort_unstable();
+    seen.dedup();
+    assert_eq!(seen.len(), sel.rays.len());
+    assert_eq!(sample.rays.len(), sel.rays.len());
+    assert_eq!(sample.weight.len(), sample.rays.len());
+    let rise = sel.rise(Some(weight));
+    assert_eq!(rise.rise_k.len(), weight.len());
+    assert!(rise.entries.iter().all(|e| (e.0 as usize) < sel.rays.len()));
+}
