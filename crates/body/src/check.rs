@@ -1,5 +1,5 @@
 //! `irmirror body check`: compares the model against reference vectors made with the real
-//! `anny` package in float64 (`shared/body/test_vectors_body36.json`).
+//! `anny` package in float64 (`assets/body/test_vectors_body36.json`).
 
 use crate::{BodyError, BodyModel, Phenotype, Pose};
 use nalgebra::Vector3;

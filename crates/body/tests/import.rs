@@ -97,7 +97,7 @@ fn real_wheel_imports_exactly_and_reproducibly() {
     .unwrap();
     assert_eq!(report.numerical_rank, 70);
     let vectors = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/body/test_vectors_body36.json");
+        .join("../../assets/body/test_vectors_body36.json");
     let out = check_vectors(&BodyModel::new(full), &vectors).unwrap();
     for o in out {
         if let CaseOutcome::Checked(e) = o {

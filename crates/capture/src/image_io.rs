@@ -127,6 +127,52 @@ pub fn read_float(path: &Path) -> Result<Image<f64>, CaptureError> {
     }
 }
 
+/// `img` as 8-bit grey, stretched between its 1st and 99th percentiles inside `region` (the
+/// whole image when the region is empty or has no finite value), so that a reflection a few
+/// tenths of a kelvin warm shows against a room tens of kelvin wide. Pixels outside a non-empty
+/// region are drawn at a third of their grey, so the region's outline shows. Non-finite pixels
+/// are black.
+pub fn stretch_percentiles(img: &Image<f64>, region: &Image<bool>) -> Image<u8> {
+    let pick = |use_region: bool| -> Vec<f64> {
+        img.data
+            .iter()
+            .zip(&region.data)
+            .filter(|(v, r)| (!use_region || **r) && v.is_finite())
+            .map(|(v, _)| *v)
+            .collect()
+    };
+    let mut vals = pick(true);
+    let dim = !vals.is_empty();
+    if vals.is_empty() {
+        vals = pick(false);
+    }
+    vals.sort_by(f64::total_cmp);
+    let q = |f: f64| {
+        vals.get(((vals.len().max(1) - 1) as f64 * f).round() as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let (lo, hi) = (q(0.01), q(0.99));
+    let span = (hi - lo).max(1e-12);
+    let data = img
+        .data
+        .iter()
+        .zip(&region.data)
+        .map(|(&v, &inside)| {
+            if !v.is_finite() {
+                return 0;
+            }
+            let g = ((v - lo) / span * 255.0).clamp(0.0, 255.0);
+            (if dim && !inside { g / 3.0 } else { g }) as u8
+        })
+        .collect();
+    Image {
+        width: img.width,
+        height: img.height,
+        data,
+    }
+}
+
 /// Reads a mask: any PNG; a pixel is inside where its first channel is non-zero.
 pub fn read_mask(path: &Path) -> Result<Image<bool>, CaptureError> {
     let img = decode(path)?.into_luma16();
@@ -165,4 +211,41 @@ pub fn write_gray8_png(img: &Image<u8>, path: &Path) -> Result<(), CaptureError>
             .ok_or_else(|| CaptureError::file(path, "image size mismatch"))?;
     buf.save(path)
         .map_err(|e| CaptureError::file(path, e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The stretch spans the region's values, not the whole frame's: a hot room corner outside
+    /// the region saturates instead of squeezing the region into a few grey levels.
+    #[test]
+    fn stretch_uses_the_region_percentiles() {
+        // 100 region pixels from 20.0 to 20.99 K, then 100 pixels of a 60 K heater outside it.
+        let mut data: Vec<f64> = (0..100).map(|i| 20.0 + 0.01 * f64::from(i)).collect();
+        data.extend(std::iter::repeat_n(60.0, 100));
+        let img = Image {
+            width: 200,
+            height: 1,
+            data,
+        };
+        let region = Image {
+            width: 200,
+            height: 1,
+            data: (0..200).map(|i| i < 100).collect(),
+        };
+        let g = stretch_percentiles(&img, &region);
+        assert_eq!(g.data[0], 0);
+        assert_eq!(g.data[50], 128, "{:?}", &g.data[45..55]);
+        assert_eq!(g.data[99], 255);
+        assert_eq!(g.data[150], 85, "outside the region: a third of its grey");
+        // An empty region falls back to the whole image (the heater is then the 99th percentile).
+        let none = Image {
+            width: 200,
+            height: 1,
+            data: vec![false; 200],
+        };
+        let g = stretch_percentiles(&img, &none);
+        assert!(g.data[50] < 10 && g.data[150] == 255);
+    }
 }

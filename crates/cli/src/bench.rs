@@ -13,9 +13,9 @@ pub enum BenchCommand {
     /// Reflection renderer: one forward + backward of the soft-IoU loss on the reference scene,
     /// dense (every reflected ray × every triangle) and fast (BVH-culled), in one run.
     Render {
-        /// The benchmark scene (JSON; the project's reference scene lies in `shared/bench/` beside
-        /// the repository, see BENCHMARKS.md).
-        #[arg(long, default_value = "../shared/bench/scene_sphere160.json")]
+        /// The benchmark scene (JSON with its masks beside it; default: the reference scene
+        /// shipped in the repository's assets/bench/, see BENCHMARKS.md).
+        #[arg(long, default_value_os_t = crate::output::shipped("assets/bench/scene_sphere160.json"))]
         scene: PathBuf,
         /// Timed repetitions of the fast path (the median is reported).
         #[arg(long, default_value_t = 50)]

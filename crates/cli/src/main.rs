@@ -8,9 +8,12 @@ mod body_cmd;
 mod demo;
 mod eval_cmd;
 mod output;
+mod plot;
 mod prior_cmd;
 mod reconstruct_cmd;
 mod result;
+mod scene3d;
+mod score_cmd;
 mod sdf_cmd;
 mod simulate_cmd;
 
@@ -64,7 +67,8 @@ enum Command {
         /// 640×512, 50°, 0.35–0.5 m from 1–3 bowls/mugs, 6–35 cm above the table, person 0.5–2 m
         /// from the objects), car (paper-like:
         /// the same camera 1.5–3 m from a car door, a pedestrian 2.5–8 m away, any facing) or
-        /// tabletop-wide (hard: Lepton-class 160×120, 57°, 0.7 m from the table).
+        /// tabletop-wide (hard: Lepton-class 160×120, 57°, 0.55 m above and 0.45 m back from a
+        /// table, person 0.5–1.5 m behind the cameras).
         #[arg(long, visible_alias = "preset", value_enum, default_value = "tabletop")]
         regime: Regime,
         /// A scene file (TOML, as written to truth/scene.toml) instead of a regime.
@@ -108,6 +112,26 @@ enum Command {
         /// Random seed (initialisations, ray draws): the same seed gives the same result.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+    },
+    /// Score a reconstruction against a simulated capture's truth.
+    ///
+    /// Prints, for the best hypothesis, the figures `demo` reports (root error, normalised 2-D
+    /// and 3-D keypoints, MPJPE, PA-MPJPE, per-vertex and facing errors, reflection IoU, object
+    /// errors), each beside its yardstick (the paper's Table 1, a random pose, our benchmark),
+    /// and the root, facing and per-vertex errors of every reported hypothesis. Reads the
+    /// result's params.json and fitted_mask.png and the capture's truth/; writes nothing unless
+    /// --json is given. `reconstruct` scores by itself when its capture has a truth/.
+    ///
+    /// Example: irmirror score car-7-result --truth car-7 --json car-7-score.json
+    Score {
+        /// The result directory (from `reconstruct` or `demo`; read only).
+        result: PathBuf,
+        /// The simulated capture it was reconstructed from (read only; needs truth/).
+        #[arg(long)]
+        truth: PathBuf,
+        /// Also write the figures as JSON to this file (not inside the result or the capture).
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
     /// Train the pose prior (a VAE over joint rotations) on the procedural pose set.
     ///
@@ -293,6 +317,11 @@ fn main() -> std::process::ExitCode {
             seed,
         } => simulate(regime, scene, shapes, &out, seed),
         Command::Bench { command } => bench::run(command),
+        Command::Score {
+            result,
+            truth,
+            json,
+        } => score_cmd::run(&result, &truth, json.as_deref()).map(|_| ()),
         Command::Reconstruct {
             capture,
             out,

@@ -2,6 +2,17 @@
 
 use image::RgbImage;
 pub use irmirror_eval::output::{Staging, save_png, write_text};
+
+/// A file the repository ships (reference data the commands use by default), at the path of the
+/// checkout the binary was built from.
+pub fn shipped(relative: &str) -> std::path::PathBuf {
+    let crate_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    crate_dir
+        .ancestors()
+        .nth(2)
+        .unwrap_or(crate_dir)
+        .join(relative)
+}
 use irmirror_geom::TriMesh;
 use irmirror_geom::nalgebra::Matrix3;
 use irmirror_geom::raster::render_orthographic;

@@ -1,11 +1,13 @@
 //! `irmirror reconstruct`: the pipeline on a capture (stages 0–2, or up to a stage).
 
-use crate::output::{Staging, write_text};
+use crate::output::{Staging, save_png, write_text};
 use anyhow::{Context, Result};
 use clap::ValueEnum;
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::{Capture, Image, write_gray8_png};
+use irmirror_eval::Truth;
+use irmirror_eval::score::{object_poses, third_view};
 use irmirror_recon::objects::reconstruct_objects;
 use irmirror_recon::pipeline::{
     Ablation, BodyPriors, Progress, ReconConfig, Reconstruction, reconstruct,
@@ -216,12 +218,55 @@ pub fn run(
             )
             .with_context(ctx)?;
             bars.finish();
-            crate::result::write(&st, "", &capture, &rec, &model, &prior, &cfg)?;
+            // A simulated capture carries its truth: score against it (read only here).
+            let truth = if Truth::exists(capture_dir) {
+                Some(Truth::load(capture_dir, &model)?)
+            } else {
+                None
+            };
+            let written = crate::result::write(
+                &st,
+                "",
+                &crate::result::ResultInputs {
+                    capture: &capture,
+                    rec: &rec,
+                    priors: BodyPriors {
+                        model: &model,
+                        prior: &prior,
+                    },
+                    cfg: &cfg,
+                    truth: truth.as_ref(),
+                },
+            )?;
+            let scored = match &truth {
+                Some(truth) => {
+                    let scored = irmirror_eval::score(
+                        truth,
+                        &written.hypotheses,
+                        &written.fitted_mask,
+                        &object_poses(&rec.objects),
+                    )?;
+                    write_text(
+                        &st.path("eval.json"),
+                        &serde_json::to_string_pretty(&scored)?,
+                    )?;
+                    save_png(
+                        &third_view(truth, &model, &written.best, &rec.objects),
+                        &st.path("views/third_camera.png"),
+                    )?;
+                    Some(scored)
+                }
+                None => None,
+            };
             let html = format!(
-                "{}<h1>irmirror reconstruction</h1><p>Capture: <code>{}</code>; seed {seed}; irmirror {}.</p>{}</body></html>",
+                "{}<h1>irmirror reconstruction</h1><p>Capture: <code>{}</code>; reconstruction seed {seed}; irmirror {}. \
+                 Settings: <a href=\"run.toml\">run.toml</a>.</p>{}{}</body></html>",
                 html_head("irmirror reconstruction"),
-                capture_dir.display(),
+                crate::result::esc(&capture_dir.display().to_string()),
                 env!("CARGO_PKG_VERSION"),
+                scored
+                    .as_ref()
+                    .map_or(String::new(), |s| crate::result::score_section("", s)),
                 crate::result::report_section("", &capture, &rec)
             );
             write_text(&st.path("report.html"), &html)?;
@@ -229,6 +274,9 @@ pub fn run(
             write_record(&st, capture_dir, "full", &cfg, seed, serde_json::json!({}))?;
             let dir = st.commit()?;
             print_summary(&rec);
+            if let Some(scored) = &scored {
+                println!("against the capture's truth:\n{}", scored.text());
+            }
             println!("wrote {} in {secs:.1} s (open report.html)", dir.display());
         }
     }
@@ -263,10 +311,8 @@ pub fn print_summary(rec: &Reconstruction) {
             h.stature_m
         );
     }
-    if rec.human.hypotheses.len() > 1 {
-        println!(
-            "note: the reflection is ambiguous; distinct hypotheses are listed best first (params.json, report.html)"
-        );
+    for note in crate::result::notes(rec) {
+        println!("note: {note}");
     }
 }
 
@@ -274,8 +320,29 @@ pub fn print_summary(rec: &Reconstruction) {
 pub fn html_head(title: &str) -> String {
     format!(
         r#"<!doctype html><html><head><meta charset="utf-8"><title>{title}</title>
-<style>body{{font-family:sans-serif;max-width:70em;margin:2em auto;line-height:1.4}}td,th{{padding:2px 10px;text-align:left}}
-figure{{display:inline-block;margin:0 1em 1em 0;vertical-align:top}}img{{image-rendering:pixelated}}pre{{background:#f4f4f4;padding:1em;overflow:auto;max-height:20em}}</style></head><body>"#
+<style>body{{font-family:sans-serif;max-width:70em;margin:2em auto;line-height:1.4}}td,th{{padding:2px 10px;text-align:left;vertical-align:top}}
+figure{{display:inline-block;margin:0 1em 1em 0;vertical-align:top}}img{{image-rendering:pixelated}}pre{{background:#f4f4f4;padding:1em;overflow:auto;max-height:20em}}
+.note{{background:#fff6d6;border-left:4px solid #e0b000;padding:4px 8px}}.yard{{color:#555;font-size:90%}}</style>
+<script>
+// The page records on its root element whether it rendered: scripts' errors and images that
+// did not load (data-errors, data-broken-images), as a headless browser test reads them.
+(function () {{
+  var root = document.documentElement, errors = 0;
+  function fail() {{ errors += 1; root.setAttribute("data-errors", String(errors)); }}
+  window.addEventListener("error", fail, true);
+  var log = console.error;
+  console.error = function () {{ fail(); log.apply(console, arguments); }};
+  window.addEventListener("load", function () {{
+    var broken = 0;
+    for (var i = 0; i < document.images.length; i++) {{
+      if (!document.images[i].complete || document.images[i].naturalWidth === 0) {{ broken += 1; }}
+    }}
+    root.setAttribute("data-images", String(document.images.length));
+    root.setAttribute("data-broken-images", String(broken));
+    root.setAttribute("data-errors", String(errors));
+  }});
+}})();
+</script></head><body>"#
     )
 }
 

@@ -2,16 +2,16 @@
 //! and the HTML section that shows them.
 
 use crate::output::{Staging, save_png, write_text};
+use crate::scene3d::{Part, camera_mesh, colour, display_mesh};
 use anyhow::Result;
-use image::{Rgb, RgbImage};
-use irmirror_body::prior::PosePrior;
-use irmirror_body::{BodyModel, PosedBody};
+use irmirror_body::PosedBody;
 use irmirror_capture::{Capture, Image, write_gray8_png};
-use irmirror_eval::views::{Drawn, object_mesh, overlay, render_view};
+use irmirror_eval::Truth;
+use irmirror_eval::views::{Drawn, object_mesh, overlay, reflection_zoom, render_view, stretched};
 use irmirror_geom::nalgebra::Vector3;
 use irmirror_geom::{PinholeCamera, Rigid3};
 use irmirror_recon::human::posed_body;
-use irmirror_recon::pipeline::Reconstruction;
+use irmirror_recon::pipeline::{BodyPriors, Reconstruction};
 use irmirror_render::bvh::Bvh;
 use irmirror_render::hard::hard_mask;
 
@@ -20,69 +20,40 @@ fn mask_png(img: &Image<bool>, path: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
-/// Loss curves (first in black, the others grey), 480×240, y from 0 to the largest value.
-pub fn plot_curves(curves: &[&[f64]]) -> RgbImage {
-    let (w, h, m) = (480u32, 240u32, 20i64);
-    let mut img = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    let ymax = curves
-        .iter()
-        .flat_map(|c| c.iter())
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(1e-9, f64::max);
-    let xmax = curves.iter().map(|c| c.len()).max().unwrap_or(1).max(2) - 1;
-    let to_px = |i: usize, v: f64| {
-        (
-            m + (i as f64 / xmax as f64 * (w as i64 - 2 * m) as f64) as i64,
-            h as i64 - m - (v / ymax * (h as i64 - 2 * m) as f64) as i64,
-        )
-    };
-    let mut put = |x: i64, y: i64, c: Rgb<u8>| {
-        if x >= 0 && y >= 0 && x < w as i64 && y < h as i64 {
-            img.put_pixel(x as u32, y as u32, c);
-        }
-    };
-    for x in m..w as i64 - m {
-        put(x, h as i64 - m, Rgb([0, 0, 0]));
-    }
-    for y in m..h as i64 - m {
-        put(m, y, Rgb([0, 0, 0]));
-    }
-    for (k, c) in curves.iter().enumerate().rev() {
-        let col = if k == 0 {
-            Rgb([20, 20, 200])
-        } else {
-            Rgb([180, 180, 180])
-        };
-        for i in 1..c.len() {
-            let ((x0, y0), (x1, y1)) = (to_px(i - 1, c[i - 1]), to_px(i, c[i]));
-            let n = (x1 - x0).abs().max((y1 - y0).abs()).max(1);
-            for s in 0..=n {
-                put(x0 + (x1 - x0) * s / n, y0 + (y1 - y0) * s / n, col);
-            }
-        }
-    }
-    img
-}
-
 /// What the writer produced, for the demo's evaluation and summary.
 pub struct Written {
     /// The best hypothesis' posed body.
     pub best: PosedBody<f64>,
+    /// Every reported hypothesis' loss and posed body, best first.
+    pub hypotheses: Vec<(f64, PosedBody<f64>)>,
     /// Fitted reflection (thermal pixels) of the best hypothesis.
     pub fitted_mask: Vec<bool>,
 }
 
+/// What a result is written from.
+pub struct ResultInputs<'a> {
+    /// The capture.
+    pub capture: &'a Capture,
+    /// The reconstruction.
+    pub rec: &'a Reconstruction,
+    /// Body model and pose prior.
+    pub priors: BodyPriors<'a>,
+    /// The settings it ran with.
+    pub cfg: &'a irmirror_recon::pipeline::ReconConfig,
+    /// The simulator's truth, when the capture has one (drawn in the 3-D scene only).
+    pub truth: Option<&'a Truth>,
+}
+
 /// Writes the reconstruction into `stage` under `prefix` (e.g. "" or "result/").
-pub fn write(
-    stage: &Staging,
-    prefix: &str,
-    capture: &Capture,
-    rec: &Reconstruction,
-    model: &BodyModel,
-    prior: &PosePrior,
-    cfg: &irmirror_recon::pipeline::ReconConfig,
-) -> Result<Written> {
+pub fn write(stage: &Staging, prefix: &str, inputs: &ResultInputs<'_>) -> Result<Written> {
+    let ResultInputs {
+        capture,
+        rec,
+        priors,
+        cfg,
+        truth,
+    } = *inputs;
+    let BodyPriors { model, prior } = priors;
     let p = |name: &str| stage.path(&format!("{prefix}{name}"));
     for d in ["debug", "objects", "hypotheses", "views"] {
         std::fs::create_dir_all(p(d))?;
@@ -99,7 +70,13 @@ pub fn write(
     mask_png(&pre.raw_mask, &p("debug/mask_raw.png"))?;
     mask_png(&pre.edges, &p("debug/edges.png"))?;
     mask_png(&pre.mask, &p("reflection_mask.png"))?;
+    // The thermal frame as a person sees it: stretched on the objects, not on the room.
+    save_png(
+        &stretched(&capture.thermal_radiance(), &pre.object_pixels),
+        &p("thermal_preview.png"),
+    )?;
     // Stage 1.
+    let mut parts = Vec::new();
     for (k, o) in rec.objects.objects.iter().enumerate() {
         let m = object_mesh(o)?;
         m.write(&p(&format!("objects/object_{k}.ply")))?;
@@ -108,6 +85,12 @@ pub fn write(
             &rec.objects.masks[k],
             &p(&format!("debug/object_{k}_mask.png")),
         )?;
+        parts.push(Part {
+            name: format!("object {k} ({}), fitted", o.category),
+            mesh: display_mesh(&m),
+            colour: colour::OBJECT,
+            visible: true,
+        });
     }
     // Stage 2.
     let mut bodies = Vec::new();
@@ -120,20 +103,78 @@ pub fn write(
             }
         }
         mesh.write(&p(&format!("hypotheses/body_{k}.ply")))?;
+        parts.push(Part {
+            name: if k == 0 {
+                "person, best hypothesis".into()
+            } else {
+                format!("hypothesis {k}")
+            },
+            mesh,
+            colour: if k == 0 {
+                colour::PERSON
+            } else {
+                colour::OTHER
+            },
+            visible: k == 0,
+        });
         bodies.push(posed);
     }
+    for (name, cam, depth_from_cam) in [
+        ("depth camera", &capture.depth_camera, &Rigid3::identity()),
+        (
+            "thermal camera",
+            &capture.thermal_camera,
+            &capture.depth_from_thermal,
+        ),
+    ] {
+        parts.push(Part {
+            name: name.into(),
+            mesh: camera_mesh(cam, depth_from_cam, 0.06),
+            colour: colour::CAMERA,
+            visible: true,
+        });
+    }
+    if let Some(t) = truth {
+        parts.push(Part {
+            name: "true person (simulator)".into(),
+            mesh: t.mesh.clone(),
+            colour: colour::TRUTH,
+            visible: true,
+        });
+        for (k, m) in t.object_meshes.iter().enumerate() {
+            parts.push(Part {
+                name: format!("object {k}, true"),
+                mesh: display_mesh(m),
+                colour: colour::TRUE_OBJECT,
+                visible: false,
+            });
+        }
+    }
+    crate::scene3d::write(&stage.path(""), prefix, &parts, &rec.objects.ground.n())?;
     let best = bodies
         .first()
         .cloned()
         .ok_or_else(|| anyhow::anyhow!("no hypothesis"))?;
     let bvh = Bvh::build(&best.vertices, &model.asset.faces);
     let fitted_mask = hard_mask(&rec.rays, &bvh, &best.vertices, &model.asset.faces);
+    let (tw, th) = (pre.mask.width, pre.mask.height);
+    mask_png(
+        &Image {
+            width: tw,
+            height: th,
+            data: fitted_mask.clone(),
+        },
+        &p("fitted_mask.png"),
+    )?;
     save_png(
         &overlay(&pre.rise_k, &pre.mask, &fitted_mask),
         &p("overlay.png"),
     )?;
+    save_png(
+        &reflection_zoom(&pre.rise_k, &pre.mask, &fitted_mask),
+        &p("reflection_zoom.png"),
+    )?;
     // The radiometric fit: observed, fitted and residual rise around the reflection.
-    let priors = irmirror_recon::pipeline::BodyPriors { model, prior };
     if let Some(fitted) = irmirror_recon::pipeline::predicted_rise(rec, priors, cfg)? {
         save_png(
             &irmirror_eval::views::rise_panels(&pre.rise_k, &fitted, &pre.mask),
@@ -146,7 +187,7 @@ pub fn write(
         .iter()
         .map(|h| h.loss_curve.as_slice())
         .collect();
-    save_png(&plot_curves(&curves), &p("loss_curve.png"))?;
+    write_text(&p("loss_curve.svg"), &crate::plot::loss_svg(&curves))?;
     let placed = rec.objects.placed();
     let faces = &model.asset.faces;
     for (name, cam, depth_from_cam) in &capture.extra_cameras {
@@ -192,7 +233,8 @@ pub fn write(
         "support_plane": rec.objects.ground.plane,
         "objects": rec.objects.objects,
         "human": {
-            "note": "The reflection constrains the person only partly: several placements can explain a small reflection. hypotheses[0] is the best by loss; the others are distinct (root > 25 cm apart or facing > 45° apart) and nearly as good when their losses are close.",
+            "note": "hypotheses[0] is the best by loss; the others are distinct (root > 25 cm apart or facing > 45° apart), the best one's front/back partner first; compare their losses.",
+            "notes": notes(rec),
             "shape": "the mean adult's phenotype with the fitted height slider (hypotheses[].height, stature_m)",
             "data_term": rec.human.data_term,
             "hypotheses": rec.human.hypotheses,
@@ -204,7 +246,18 @@ pub fn write(
         },
     });
     write_text(&p("params.json"), &serde_json::to_string_pretty(&params)?)?;
-    Ok(Written { best, fitted_mask })
+    let hypotheses = rec
+        .human
+        .hypotheses
+        .iter()
+        .map(|h| h.loss)
+        .zip(bodies)
+        .collect();
+    Ok(Written {
+        best,
+        hypotheses,
+        fitted_mask,
+    })
 }
 
 /// A camera beside the scene, level with the support plane, that sees the objects and the
@@ -238,30 +291,88 @@ fn overview_camera(
     )
 }
 
+/// Notes that depend on the data: a small reflection, hypotheses that explain it about equally,
+/// warm pixels outside the objects (a person or another heat source seen directly).
+pub fn notes(rec: &Reconstruction) -> Vec<String> {
+    let pre = &rec.pre;
+    let mut out = Vec::new();
+    let n = pre.mask.data.iter().filter(|m| **m).count();
+    if n < SMALL_REFLECTION_PX {
+        out.push(format!(
+            "The reflection covers only {n} thermal pixels: a small reflection constrains the person only partly, \
+             and several placements can explain it (compare the hypotheses below)."
+        ));
+    }
+    let hs = &rec.human.hypotheses;
+    if let Some(best) = hs.first() {
+        for (k, h) in hs.iter().enumerate().skip(1) {
+            if h.loss <= best.loss * 1.1 {
+                out.push(format!(
+                    "Hypothesis {k} explains the reflection about as well as the best (loss {:.3} against {:.3}): \
+                     the data do not decide between them.",
+                    h.loss, best.loss
+                ));
+            }
+        }
+    }
+    let warm_outside = pre
+        .rise_k
+        .data
+        .iter()
+        .zip(&pre.object_pixels.data)
+        .filter(|(r, obj)| !**obj && **r > 2.0 * pre.threshold_k)
+        .count();
+    if warm_outside >= DIRECT_VIEW_PX {
+        out.push(format!(
+            "{warm_outside} thermal pixels outside the objects are warmer than in the background frame by more than \
+             {:.2} K: a person (or another heat source) may be in the thermal camera's direct view. Stage 2 uses only \
+             the reflections in the objects.",
+            2.0 * pre.threshold_k
+        ));
+    }
+    out
+}
+
+/// Fewer reflection pixels than this make a "small reflection" note (the hard regime's 10–25
+/// pixels; the paper-like ones reach hundreds).
+const SMALL_REFLECTION_PX: usize = 100;
+
+/// Warm pixels outside the objects from which a direct view is noted.
+const DIRECT_VIEW_PX: usize = 20;
+
 /// The report section of a reconstruction (paths relative to the report, under `prefix`).
 pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> String {
-    let mut s = String::new();
+    let mut s = String::from("<h2>Reconstruction</h2>");
+    for n in notes(rec) {
+        s += &format!("<p class=\"note\">Note: {}</p>", esc(&n));
+    }
     s += &format!(
-        r#"<h2>Reconstruction</h2>
-<figure><img src="{prefix}overlay.png" width="480"><figcaption>reflection: observed (green), fitted (magenta), both (white)</figcaption></figure>
-<figure><img src="{prefix}views/overview.png" width="480"><figcaption>fitted objects (blue) and person (orange), seen from beside the scene</figcaption></figure>
-<figure><img src="{prefix}loss_curve.png" width="480"><figcaption>loss per step: best hypothesis (blue), others (grey)</figcaption></figure>
+        r#"<figure><img src="{prefix}reflection_zoom.png" height="240"><figcaption>the reflection, enlarged: observed (green) | fitted, best hypothesis (magenta) | both (white where they agree)</figcaption></figure>
 "#
     );
     if rec.human.data_term == "radiometric" {
         s += &format!(
-            r#"<figure><img src="{prefix}rise_fit.png" width="720"><figcaption>thermal rise around the reflection, best hypothesis: observed | fitted | residual (observed − fitted: red warmer, blue cooler than the fit; ± half the observed peak)</figcaption></figure>
+            r#"<figure><img src="{prefix}rise_fit.png" height="240"><figcaption>thermal rise around the reflection, best hypothesis: observed | fitted | residual (observed − fitted: red warmer, blue cooler than the fit; ± half the observed peak)</figcaption></figure>
 "#
         );
     } else {
         s += &format!(
             "<p>Stage 2 fitted the binary reflection mask: {}.</p>",
-            rec.human.data_term
+            esc(&rec.human.data_term)
         );
     }
+    s += &format!(
+        r#"<figure><img src="{prefix}thermal_preview.png" width="480"><figcaption>thermal frame, stretched between the 1st and 99th percentiles of the pixels that see an object (the others dimmed)</figcaption></figure>
+<figure><img src="{prefix}overlay.png" width="480"><figcaption>whole frame: rise over the background (grey), observed (green) and fitted (magenta) reflection, both (white)</figcaption></figure>
+<figure><img src="{prefix}views/overview.png" width="480"><figcaption>fitted objects (blue) and person (orange), seen from beside the scene</figcaption></figure>
+{view3d}<figure><img src="{prefix}loss_curve.svg" width="520"><figcaption>stage 2's loss per refinement step, every hypothesis</figcaption></figure>
+"#,
+        view3d = crate::scene3d::section(prefix)
+    );
     for (name, _, _) in &capture.extra_cameras {
         s += &format!(
-            r#"<figure><img src="{prefix}views/{name}.png" width="480"><figcaption>fit seen from the capture's camera “{name}”</figcaption></figure>"#
+            r#"<figure><img src="{prefix}views/{name}.png" width="480"><figcaption>fit seen from the capture's camera “{}”</figcaption></figure>"#,
+            esc(name)
         );
     }
     s += "<h3>Objects (stage 1)</h3><table><tr><th>#</th><th>category</th><th>shape</th><th>position (m, depth frame)</th><th>scale (m)</th><th>mean surface error</th><th>mask</th></tr>";
@@ -315,6 +426,50 @@ pub fn report_section(prefix: &str, capture: &Capture, rec: &Reconstruction) -> 
     s += &format!(
         "<p>Files: <a href=\"{prefix}body.ply\">body.ply</a> / <a href=\"{prefix}body.obj\">.obj</a> / <a href=\"{prefix}body.glb\">.glb</a>, \
          objects/, <a href=\"{prefix}params.json\">params.json</a>, <a href=\"{prefix}reflection_mask.png\">reflection_mask.png</a>, debug/ (stage-0 intermediates, object masks).</p>"
+    );
+    s
+}
+
+/// Escapes text for HTML.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// The report section of a result scored against the simulator's truth: the figures with their
+/// yardsticks, every hypothesis' errors, and the evaluation camera's view (under `prefix`).
+pub fn score_section(prefix: &str, scored: &irmirror_eval::Scored) -> String {
+    let mut s = String::from(
+        "<h2>Evaluation against the simulator's truth</h2>\
+         <p>The truth (the capture's <code>truth/</code>) is read only here, never by the reconstruction. \
+         Same figures: <code>irmirror score</code>; over many captures: <code>irmirror eval</code>.</p>\
+         <table><tr><th>figure</th><th>this result</th><th>yardstick</th></tr>",
+    );
+    for r in scored.best.rows() {
+        s += &format!(
+            "<tr><th>{}</th><td>{}</td><td class=\"yard\">{}</td></tr>",
+            esc(r.name),
+            esc(&r.value),
+            esc(r.yardstick)
+        );
+    }
+    s += "</table><p>Every reported hypothesis against the truth:</p>\
+          <table><tr><th>#</th><th>loss</th><th>root error</th><th>facing error</th><th>per-vertex error</th></tr>";
+    for (k, h) in scored.hypotheses.iter().enumerate() {
+        s += &format!(
+            "<tr><td>{k}</td><td>{:.3}</td><td>{:.3} m</td><td>{}</td><td>{}</td></tr>",
+            h.loss,
+            h.root_error_m,
+            h.facing_error_deg
+                .map_or("n/a".into(), |v| format!("{v:.0}°")),
+            h.vertex_error_m
+                .map_or("n/a".into(), |v| format!("{v:.3} m"))
+        );
+    }
+    s += &format!(
+        "</table><figure><img src=\"{prefix}views/third_camera.png\" width=\"480\"><figcaption>evaluation camera (not an input): \
+         fitted person (orange), true person (green), fitted objects (blue)</figcaption></figure>"
     );
     s
 }

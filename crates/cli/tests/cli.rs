@@ -45,6 +45,7 @@ fn help_explains_every_command() {
         "demo",
         "simulate",
         "reconstruct",
+        "score",
         "train-pose-prior",
         "eval",
         "train-sdf",
@@ -79,13 +80,14 @@ fn demo_is_deterministic_and_complete() {
         "params.json",
         "eval.json",
         "overlay.png",
-        "loss_curve.png",
+        "loss_curve.svg",
         "views/third_camera.png",
         "views/overview.png",
         "objects/object_0.ply",
         "objects/object_0.glb",
         "hypotheses/body_0.ply",
         "reflection_mask.png",
+        "fitted_mask.png",
         "person_truth.glb",
         "person_truth.obj",
         "person_truth.ply",
@@ -121,7 +123,7 @@ fn demo_is_deterministic_and_complete() {
 #[test]
 fn bad_inputs_fail_cleanly() {
     let vectors =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/body/test_vectors_body36.json");
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
             vec![
@@ -211,15 +213,9 @@ fn bad_inputs_fail_cleanly() {
 #[test]
 fn body_check_reports_the_builtin_asset_within_tolerance() {
     let vectors =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/body/test_vectors_body36.json");
-    let o = irmirror(&[
-        "body",
-        "check",
-        "--vectors",
-        vectors.to_str().unwrap(),
-        "--tolerance-m",
-        "5e-4",
-    ]);
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/body/test_vectors_body36.json");
+    // Without --vectors: the reference vectors the repository ships.
+    let o = irmirror(&["body", "check", "--tolerance-m", "5e-4"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -239,17 +235,8 @@ fn body_check_reports_the_builtin_asset_within_tolerance() {
 
 #[test]
 fn benches_print_their_tables() {
-    let scene =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/bench/scene_sphere160.json");
-    let o = irmirror(&[
-        "bench",
-        "render",
-        "--scene",
-        scene.to_str().unwrap(),
-        "--no-dense",
-        "--reps",
-        "2",
-    ]);
+    // Without --scene: the reference scene the repository ships.
+    let o = irmirror(&["bench", "render", "--no-dense", "--reps", "2"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -481,7 +468,7 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         "body.glb",
         "params.json",
         "overlay.png",
-        "loss_curve.png",
+        "loss_curve.svg",
         "report.html",
         "run.toml",
         "objects/object_0.ply",
@@ -493,6 +480,84 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         serde_json::from_str(&std::fs::read_to_string(out2.join("params.json")).unwrap()).unwrap();
     assert!(!params["human"]["hypotheses"].as_array().unwrap().is_empty());
     assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
+    // A simulated capture carries its truth: reconstruct scored itself, and `score` gives the
+    // same figures from the files alone (the body re-posed from params.json).
+    let own: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out2.join("eval.json")).unwrap()).unwrap();
+    assert!(out2.join("views/third_camera.png").exists() && out2.join("fitted_mask.png").exists());
+    let report = std::fs::read_to_string(out2.join("report.html")).unwrap();
+    assert!(report.contains("Evaluation against the simulator's truth"));
+    let json = tmp("rec-score.json");
+    let o = irmirror(&[
+        "score",
+        out2.to_str().unwrap(),
+        "--truth",
+        cap.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(
+        o.status.success() && String::from_utf8_lossy(&o.stdout).contains("root (pelvis)"),
+        "{}",
+        stderr(&o)
+    );
+    let again: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for key in [
+        "root_error_m",
+        "vertex_error_m",
+        "reflection_iou",
+        "mpjpe_m",
+    ] {
+        let (a, b) = (
+            own["best"][key].as_f64().unwrap(),
+            again["best"][key].as_f64().unwrap(),
+        );
+        assert!((a - b).abs() < 1e-9, "{key}: {a} vs {b}");
+    }
+    assert_eq!(
+        own["hypotheses"].as_array().unwrap().len(),
+        params["human"]["hypotheses"].as_array().unwrap().len()
+    );
+    std::fs::remove_file(&json).ok();
+    // Scoring refuses, with a reason: a directory that is not a result, a capture without
+    // truth, a JSON path inside an input (nothing written there).
+    let o = irmirror(&[
+        "score",
+        cap.to_str().unwrap(),
+        "--truth",
+        cap.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("params.json"),
+        "{}",
+        stderr(&o)
+    );
+    let o = irmirror(&[
+        "score",
+        out2.to_str().unwrap(),
+        "--truth",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("truth"),
+        "{}",
+        stderr(&o)
+    );
+    let inside = out2.join("score.json");
+    let o = irmirror(&[
+        "score",
+        out2.to_str().unwrap(),
+        "--truth",
+        cap.to_str().unwrap(),
+        "--json",
+        inside.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("never modified") && !inside.exists(),
+        "{}",
+        stderr(&o)
+    );
     // Stage 1 alone, and an unknown ablation is refused by the parser.
     let out3 = tmp("rec-out3");
     let o = irmirror(&[

@@ -15,9 +15,11 @@ pub mod bench;
 pub mod metrics;
 pub mod output;
 pub mod score;
+pub mod truth;
 pub mod views;
 
-pub use score::{Evaluation, evaluate};
+pub use score::{Evaluation, Scored, evaluate, score};
+pub use truth::Truth;
 
 /// Errors of evaluation.
 #[derive(Debug, thiserror::Error)]
@@ -48,6 +50,14 @@ pub enum EvalError {
     /// A camera transform is not rigid.
     #[error(transparent)]
     Geom(#[from] irmirror_geom::GeomError),
+    /// A file of a result or of a capture's truth that is missing or malformed.
+    #[error("{path}: {reason}")]
+    Input {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// A benchmark selection that selects nothing.
     #[error("{0}")]
     Selection(String),

@@ -3,13 +3,13 @@
 
 use crate::EvalError;
 use crate::metrics::{mpjpe, normalised_distance, pa_mpjpe};
+use crate::truth::Truth;
 use crate::views::{Drawn, render_view};
 use irmirror_body::{BodyModel, PosedBody};
-use irmirror_geom::Rigid3;
+use irmirror_geom::Similarity3;
 use irmirror_recon::objects::Objects;
 use irmirror_render::ReflectedRays;
 use irmirror_render::hard::hard_mask;
-use irmirror_sim::Simulation;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -44,6 +44,189 @@ pub struct Evaluation {
     pub object_scale_error_pct: Vec<f64>,
 }
 
+/// One figure of an [`Evaluation`] in words: its name, its value with units, and what to
+/// compare it with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FigureRow {
+    /// What is measured.
+    pub name: &'static str,
+    /// The value, with units.
+    pub value: String,
+    /// What to compare it with (the paper, the Random baseline, our benchmark).
+    pub yardstick: &'static str,
+}
+
+impl Evaluation {
+    /// The figures in words, in a fixed order, each with its yardstick. The benchmark medians
+    /// quoted are the README's held-out `irmirror eval --preset quick` (2026-11-30).
+    pub fn rows(&self) -> Vec<FigureRow> {
+        let opt = |x: Option<f64>, unit: &str, digits: usize| {
+            x.map_or("n/a".to_string(), |v| format!("{v:.digits$}{unit}"))
+        };
+        let list = |xs: &[f64], k: f64, unit: &str| {
+            if xs.is_empty() {
+                "none".to_string()
+            } else {
+                xs.iter()
+                    .map(|x| format!("{:.1}", x * k))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+                    + unit
+            }
+        };
+        vec![
+            FigureRow {
+                name: "root (pelvis) position error",
+                value: format!(
+                    "{:.3} m ({:.1} % of the person's {:.2} m from the camera)",
+                    self.root_error_m,
+                    100.0 * self.root_error_m / self.person_distance_m.max(1e-9),
+                    self.person_distance_m
+                ),
+                yardstick: "goal ≤ 0.10 m tabletop, ≤ 5 % car; benchmark median 0.14 m bowls, 0.50 m mugs, 0.79 m car, 0.28 m wide",
+            },
+            FigureRow {
+                name: "2-D keypoints, evaluation camera (normalised)",
+                value: opt(self.keypoints_2d_normalised, "", 3),
+                yardstick: "paper Table 1, real captures: 0.116 bowl, 0.094 mug (random HumanEva pose 0.35–0.37); our random pose at the true root ≈ 0.26",
+            },
+            FigureRow {
+                name: "3-D keypoints (normalised)",
+                value: opt(self.keypoints_3d_normalised, "", 3),
+                yardstick: "paper Table 1 (3-D skeleton): 0.152 bowl, 0.126 mug (random 0.32)",
+            },
+            FigureRow {
+                name: "MPJPE",
+                value: opt(self.mpjpe_m, " m", 3),
+                yardstick: "mean joint distance, root error included",
+            },
+            FigureRow {
+                name: "PA-MPJPE",
+                value: opt(self.pa_mpjpe_m, " m", 3),
+                yardstick: "after similarity alignment: pose alone",
+            },
+            FigureRow {
+                name: "mean per-vertex error",
+                value: opt(self.vertex_error_m, " m", 3),
+                yardstick: "goal ≤ 0.12 m; random pose at the true root and facing ≈ 0.26 m; benchmark median 0.34 bowls, 0.67 mugs, 0.66 car, 0.41 wide",
+            },
+            FigureRow {
+                name: "facing error",
+                value: opt(self.facing_error_deg, "°", 0),
+                yardstick: "≤ 30° counts as facing right; 180° = turned around",
+            },
+            FigureRow {
+                name: "reflection IoU (fitted vs true mask)",
+                value: format!("{:.2}", self.reflection_iou),
+                yardstick: "1 = the fitted body reflects on exactly the true pixels",
+            },
+            FigureRow {
+                name: "object translation error",
+                value: list(&self.object_translation_error_m, 1e3, " mm"),
+                yardstick: "goal ≤ 5 mm bowls and mugs, ≤ 10 mm car",
+            },
+            FigureRow {
+                name: "object scale error",
+                value: list(&self.object_scale_error_pct, 1.0, " %"),
+                yardstick: "goal ≤ 3 %",
+            },
+        ]
+    }
+
+    /// [`Self::rows`] as an aligned plain-text table.
+    pub fn text_table(&self) -> String {
+        let rows = self.rows();
+        let w0 = rows
+            .iter()
+            .map(|r| r.name.chars().count())
+            .max()
+            .unwrap_or(0);
+        let w1 = rows
+            .iter()
+            .map(|r| r.value.chars().count())
+            .max()
+            .unwrap_or(0);
+        let pad = |s: &str, w: usize| format!("{s}{}", " ".repeat(w - s.chars().count()));
+        rows.iter()
+            .map(|r| {
+                format!(
+                    "{}  {}  {}\n",
+                    pad(r.name, w0),
+                    pad(&r.value, w1),
+                    r.yardstick
+                )
+            })
+            .collect()
+    }
+}
+
+/// The figures of one reported hypothesis (any of them, not only the best).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HypothesisScore {
+    /// Its stage-2 loss.
+    pub loss: f64,
+    /// Root error, m.
+    pub root_error_m: f64,
+    /// Facing error, degrees.
+    pub facing_error_deg: Option<f64>,
+    /// Mean per-vertex error, m.
+    pub vertex_error_m: Option<f64>,
+}
+
+/// A result scored against the truth: every figure of the best hypothesis, and the root, facing
+/// and per-vertex errors of every reported one (`eval.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Scored {
+    /// The best hypothesis (the first reported).
+    pub best: Evaluation,
+    /// Every reported hypothesis, in the result's order.
+    pub hypotheses: Vec<HypothesisScore>,
+}
+
+/// Scores the reported hypotheses (`(loss, body)`, best first), the best one's reflection
+/// `mask` and the fitted objects' placements against `truth`.
+pub fn score(
+    truth: &Truth,
+    hypotheses: &[(f64, PosedBody<f64>)],
+    mask: &[bool],
+    objects: &[Similarity3<f64>],
+) -> Result<Scored, EvalError> {
+    let (_, best) = hypotheses
+        .first()
+        .ok_or_else(|| EvalError::Selection("the result has no hypothesis".into()))?;
+    let best = evaluate(truth, best, mask, objects)?;
+    let hypotheses = hypotheses
+        .iter()
+        .map(|(loss, b)| HypothesisScore {
+            loss: *loss,
+            root_error_m: (b.joints[0] - truth.joints[0]).norm(),
+            facing_error_deg: facing_error_deg(&b.keypoints, &truth.keypoints),
+            vertex_error_m: vertex_error(&b.vertices, &truth.mesh.vertices),
+        })
+        .collect();
+    Ok(Scored { best, hypotheses })
+}
+
+impl Scored {
+    /// The best hypothesis' table, then one line per hypothesis.
+    pub fn text(&self) -> String {
+        let mut s = self.best.text_table();
+        s += "hypotheses (best by loss first): loss, root error, facing error, per-vertex error\n";
+        for (k, h) in self.hypotheses.iter().enumerate() {
+            s += &format!(
+                "  #{k}: {:.3}, {:.3} m, {}, {}\n",
+                h.loss,
+                h.root_error_m,
+                h.facing_error_deg
+                    .map_or("n/a".into(), |v| format!("{v:.0}°")),
+                h.vertex_error_m
+                    .map_or("n/a".into(), |v| format!("{v:.3} m")),
+            );
+        }
+        s
+    }
+}
+
 /// The thermal pixels whose (unblocked) reflected ray hits `body`.
 pub fn fitted_mask(
     model: &BodyModel,
@@ -54,34 +237,17 @@ pub fn fitted_mask(
     hard_mask(rays, &bvh, &body.vertices, &model.asset.faces)
 }
 
-/// The simulator's evaluation camera relative to the depth camera.
-pub fn depth_from_third(sim: &Simulation) -> Result<Rigid3<f64>, EvalError> {
-    Ok(sim
-        .scene
-        .depth_camera
-        .world_from_camera
-        .to_rigid()?
-        .inverse()
-        * sim.scene.third_camera.world_from_camera.to_rigid()?)
-}
-
-/// The third camera's view: fitted body (orange), true body (green), fitted objects.
+/// The evaluation camera's view: fitted body (orange), true body (green), fitted objects.
 pub fn third_view(
-    sim: &Simulation,
+    truth: &Truth,
     model: &BodyModel,
     body: &PosedBody<f64>,
     objects: &Objects,
-) -> Result<image::RgbImage, EvalError> {
-    let truth: Vec<Vector3<f64>> = sim
-        .body
-        .mesh
-        .vertices
-        .iter()
-        .map(|v| Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2])))
-        .collect();
-    Ok(render_view(
-        &sim.scene.third_camera.intrinsics,
-        &depth_from_third(sim)?,
+) -> image::RgbImage {
+    let true_vertices = truth.vertices();
+    render_view(
+        &truth.third.intrinsics,
+        &truth.third.depth_from_camera,
         &[
             Drawn {
                 vertices: &body.vertices,
@@ -89,29 +255,55 @@ pub fn third_view(
                 colour: [240, 150, 60],
             },
             Drawn {
-                vertices: &truth,
-                triangles: &sim.body.mesh.triangles,
+                vertices: &true_vertices,
+                triangles: &truth.mesh.triangles,
                 colour: [80, 200, 90],
             },
         ],
         &objects.placed(),
-    ))
+    )
 }
 
-/// Evaluates `body` (with its reflection `mask`) and the fitted `objects` against `sim`.
+/// The placements of fitted objects, in their order.
+pub fn object_poses(objects: &Objects) -> Vec<Similarity3<f64>> {
+    objects
+        .objects
+        .iter()
+        .map(|o| o.depth_from_object)
+        .collect()
+}
+
+/// Evaluates `body` (with its reflection `mask`, thermal pixels row-major) and the fitted
+/// objects' placements (`objects`, capture order) against `truth`.
 pub fn evaluate(
-    sim: &Simulation,
+    truth: &Truth,
     body: &PosedBody<f64>,
     mask: &[bool],
-    objects: &Objects,
+    objects: &[Similarity3<f64>],
 ) -> Result<Evaluation, EvalError> {
-    let third = &sim.scene.third_camera;
-    let third_from_depth = depth_from_third(sim)?.inverse();
+    let truth_mask = &truth.reflection_mask;
+    if truth_mask.data.len() != mask.len() {
+        return Err(EvalError::Selection(format!(
+            "the fitted reflection mask has {} pixels, the true one {}×{}: not a result of this capture",
+            mask.len(),
+            truth_mask.width,
+            truth_mask.height
+        )));
+    }
+    if objects.len() != truth.object_poses.len() {
+        return Err(EvalError::Selection(format!(
+            "{} fitted objects, the capture has {}: not a result of this capture",
+            objects.len(),
+            truth.object_poses.len()
+        )));
+    }
+    let third = &truth.third;
+    let third_from_depth = third.depth_from_camera.inverse();
     let v3 = |p: &Vector3<f64>| vec![p.x, p.y, p.z];
     let (mut kp_fit, mut kp_true) = (Vec::new(), Vec::new());
-    for (k, truth) in sim.third_view.1.iter().enumerate() {
+    for (k, t) in third.keypoints_px.iter().enumerate() {
         if let (Some((u, v)), Some((a, b))) = (
-            truth,
+            t,
             third
                 .intrinsics
                 .project(&third_from_depth.transform_point(&body.keypoints[k])),
@@ -120,7 +312,6 @@ pub fn evaluate(
             kp_fit.push(vec![a, b]);
         }
     }
-    let truth_mask = &sim.reflection_mask;
     let inter = truth_mask
         .data
         .iter()
@@ -134,23 +325,23 @@ pub fn evaluate(
         .filter(|(a, b)| **a || **b)
         .count();
     let (mut t_err, mut s_err) = (Vec::new(), Vec::new());
-    for (o, p) in objects.objects.iter().zip(&sim.object_poses) {
-        t_err.push((o.depth_from_object.translation - p.translation).norm());
-        s_err.push((o.depth_from_object.scale / p.scale - 1.0).abs() * 100.0);
+    for (o, p) in objects.iter().zip(&truth.object_poses) {
+        t_err.push((o.translation - p.translation).norm());
+        s_err.push((o.scale / p.scale - 1.0).abs() * 100.0);
     }
     let joints = |j: &[Vector3<f64>]| j.iter().map(v3).collect::<Vec<_>>();
     Ok(Evaluation {
-        root_error_m: (body.joints[0] - sim.body.joints[0]).norm(),
-        person_distance_m: sim.body.joints[0].norm(),
+        root_error_m: (body.joints[0] - truth.joints[0]).norm(),
+        person_distance_m: truth.joints[0].norm(),
         keypoints_2d_normalised: normalised_distance(&kp_fit, &kp_true),
         keypoints_3d_normalised: normalised_distance(
             &joints(&body.keypoints),
-            &joints(&sim.body.keypoints),
+            &joints(&truth.keypoints),
         ),
-        mpjpe_m: mpjpe(&joints(&body.joints), &joints(&sim.body.joints)),
-        vertex_error_m: vertex_error(&body.vertices, &sim.body.mesh.vertices),
-        facing_error_deg: facing_error_deg(&body.keypoints, &sim.body.keypoints),
-        pa_mpjpe_m: pa_mpjpe(&joints(&body.joints), &joints(&sim.body.joints)),
+        mpjpe_m: mpjpe(&joints(&body.joints), &joints(&truth.joints)),
+        vertex_error_m: vertex_error(&body.vertices, &truth.mesh.vertices),
+        facing_error_deg: facing_error_deg(&body.keypoints, &truth.keypoints),
+        pa_mpjpe_m: pa_mpjpe(&joints(&body.joints), &joints(&truth.joints)),
         reflection_iou: inter as f64 / union.max(1) as f64,
         object_translation_error_m: t_err,
         object_scale_error_pct: s_err,

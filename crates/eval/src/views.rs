@@ -35,26 +35,14 @@ pub fn overlay(rise_k: &Image<f64>, observed: &Image<bool>, fitted: &[bool]) -> 
     })
 }
 
-/// Observed rise, fitted rise and their residual side by side, cropped to the reflection (the
-/// mask's largest connected piece, 3 pixels around) and enlarged
-/// by nearest neighbour to ≈ 240 pixels high. Rises share one grey scale (0 to the observed
-/// peak); the residual (observed − fitted) is blue (negative) – white – red (positive) over
-/// ± half the peak. Separated by 4-pixel black bars.
-pub fn rise_panels(observed: &Image<f64>, fitted: &Image<f64>, mask: &Image<bool>) -> RgbImage {
-    let (w, h) = (observed.width, observed.height);
-    let peak = observed
-        .data
-        .iter()
-        .zip(&mask.data)
-        .filter(|(_, m)| **m)
-        .map(|(r, _)| *r)
-        .fold(1e-9, f64::max);
-    // The bounding box of the mask's largest 8-connected piece (the person; a rim's streak is
-    // another piece).
+/// The bounding box `[x0, y0, x1, y1]` (inclusive) of the largest 8-connected piece of `mask`
+/// (`w × h`, row-major): the person's reflection, not a rim's streak. The whole image when the
+/// mask is empty.
+pub fn largest_piece_box(mask: &[bool], w: u32, h: u32) -> [u32; 4] {
     let mut seen = vec![false; (w * h) as usize];
     let mut best: Option<(usize, [u32; 4])> = None;
     for start in 0..w * h {
-        if !mask.data[start as usize] || seen[start as usize] {
+        if !mask[start as usize] || seen[start as usize] {
             continue;
         }
         let (mut stack, mut n, mut b) = (vec![start], 0, [w, h, 0, 0]);
@@ -78,7 +66,7 @@ pub fn rise_panels(observed: &Image<f64>, fitted: &Image<f64>, mask: &Image<bool
                     continue;
                 }
                 let j = (ny as u32 * w + nx as u32) as usize;
-                if mask.data[j] && !seen[j] {
+                if mask[j] && !seen[j] {
                     seen[j] = true;
                     stack.push(j as u32);
                 }
@@ -88,7 +76,74 @@ pub fn rise_panels(observed: &Image<f64>, fitted: &Image<f64>, mask: &Image<bool
             best = Some((n, b));
         }
     }
-    let [x0, y0, x1, y1] = best.map_or([0, 0, w - 1, h - 1], |(_, b)| b);
+    best.map_or([0, 0, w - 1, h - 1], |(_, b)| b)
+}
+
+/// The reflection enlarged (nearest neighbour): the box around the largest piece of observed ∪
+/// fitted, 3 pixels around, ≈ 240 pixels high, in three panels separated by black bars: the
+/// observed mask (green) over the rise, the fitted one (magenta), both (white where they agree).
+pub fn reflection_zoom(rise_k: &Image<f64>, observed: &Image<bool>, fitted: &[bool]) -> RgbImage {
+    let (w, h) = (rise_k.width, rise_k.height);
+    let union: Vec<bool> = observed
+        .data
+        .iter()
+        .zip(fitted)
+        .map(|(a, b)| *a || *b)
+        .collect();
+    let [x0, y0, x1, y1] = largest_piece_box(&union, w, h);
+    let pad = 3;
+    let (x0, y0) = (x0.saturating_sub(pad), y0.saturating_sub(pad));
+    let (x1, y1) = ((x1 + pad).min(w - 1), (y1 + pad).min(h - 1));
+    let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
+    let k = (240 / ch).clamp(1, 24).min((300 / cw).max(1));
+    let peak = (0..ch)
+        .flat_map(|y| (0..cw).map(move |x| ((y0 + y) * w + x0 + x) as usize))
+        .map(|i| rise_k.data[i])
+        .fold(1e-9, f64::max);
+    let (gap, pw) = (4, cw * k);
+    RgbImage::from_fn(3 * pw + 2 * gap, ch * k, |x, y| {
+        let panel = x / (pw + gap);
+        let xin = x % (pw + gap);
+        if xin >= pw {
+            return Rgb([0, 0, 0]);
+        }
+        let i = ((y0 + y / k) * w + x0 + xin / k) as usize;
+        let g = (rise_k.data[i].max(0.0) / peak * 160.0) as u8;
+        let (o, f) = (observed.data[i], fitted[i]);
+        match (panel, o, f) {
+            (0, true, _) | (2, true, false) => Rgb([40, 220, 60]),
+            (1, _, true) | (2, false, true) => Rgb([230, 40, 220]),
+            (2, true, true) => Rgb([255, 255, 255]),
+            _ => Rgb([g, g, g]),
+        }
+    })
+}
+
+/// `img` in grey, stretched between its 1st and 99th percentiles inside `region`
+/// ([`irmirror_capture::image_io::stretch_percentiles`]).
+pub fn stretched(img: &Image<f64>, region: &Image<bool>) -> RgbImage {
+    let g = irmirror_capture::image_io::stretch_percentiles(img, region);
+    RgbImage::from_fn(g.width, g.height, |x, y| {
+        let v = g.data[(y * g.width + x) as usize];
+        Rgb([v, v, v])
+    })
+}
+
+/// Observed rise, fitted rise and their residual side by side, cropped to the reflection (the
+/// mask's largest connected piece, 3 pixels around) and enlarged
+/// by nearest neighbour to ≈ 240 pixels high. Rises share one grey scale (0 to the observed
+/// peak); the residual (observed − fitted) is blue (negative) – white – red (positive) over
+/// ± half the peak. Separated by 4-pixel black bars.
+pub fn rise_panels(observed: &Image<f64>, fitted: &Image<f64>, mask: &Image<bool>) -> RgbImage {
+    let (w, h) = (observed.width, observed.height);
+    let peak = observed
+        .data
+        .iter()
+        .zip(&mask.data)
+        .filter(|(_, m)| **m)
+        .map(|(r, _)| *r)
+        .fold(1e-9, f64::max);
+    let [x0, y0, x1, y1] = largest_piece_box(&mask.data, w, h);
     let pad = 3;
     let (x0, y0) = (x0.saturating_sub(pad), y0.saturating_sub(pad));
     let (x1, y1) = ((x1 + pad).min(w - 1), (y1 + pad).min(h - 1));
@@ -183,4 +238,60 @@ pub fn render_view(
         })
         .collect();
     RgbImage::from_fn(w, h, |x, y| Rgb(px[(y * w + x) as usize]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mask(w: u32, h: u32, on: &[(u32, u32)]) -> Image<bool> {
+        let mut m = Image::filled(w, h, false);
+        for &(x, y) in on {
+            m.data[(y * w + x) as usize] = true;
+        }
+        m
+    }
+
+    #[test]
+    fn the_largest_piece_is_boxed() {
+        // A 2-pixel streak and a 4-pixel blob (diagonal neighbours join it).
+        let m = mask(
+            20,
+            10,
+            &[(1, 1), (2, 1), (10, 5), (11, 6), (12, 6), (12, 7)],
+        );
+        assert_eq!(largest_piece_box(&m.data, 20, 10), [10, 5, 12, 7]);
+        assert_eq!(largest_piece_box(&[false; 200], 20, 10), [0, 0, 19, 9]);
+    }
+
+    /// The zoom crops around observed ∪ fitted, enlarges by an integer factor and colours each
+    /// panel's pixels by what it shows.
+    #[test]
+    fn reflection_zoom_shows_observed_fitted_and_both() {
+        let (w, h) = (64, 48);
+        let observed = mask(w, h, &[(30, 20), (31, 20)]);
+        let fitted = mask(w, h, &[(31, 20), (32, 20)]).data;
+        let rise = Image::filled(w, h, 0.0);
+        let z = reflection_zoom(&rise, &observed, &fitted);
+        // Box x 30–32, y 20–20, 3 pixels around: 9 × 7 pixels, enlarged 24×.
+        let (cw, ch, k) = (9, 7, 24);
+        assert_eq!((z.width(), z.height()), (3 * cw * k + 8, ch * k));
+        let at = |panel: u32, x: u32, y: u32| {
+            z.get_pixel(
+                panel * (cw * k + 4) + (x - 27) * k + k / 2,
+                (y - 17) * k + k / 2,
+            )
+            .0
+        };
+        assert_eq!(at(0, 30, 20), [40, 220, 60]);
+        assert_eq!(
+            at(0, 32, 20),
+            [0, 0, 0],
+            "panel 0 shows the observed mask only"
+        );
+        assert_eq!(at(1, 32, 20), [230, 40, 220]);
+        assert_eq!(at(2, 30, 20), [40, 220, 60]);
+        assert_eq!(at(2, 31, 20), [255, 255, 255]);
+        assert_eq!(at(2, 32, 20), [230, 40, 220]);
+    }
 }

@@ -47,6 +47,50 @@ impl TriMesh {
         Ok(())
     }
 
+    /// A lighter copy for display: vertices clustered on a grid of `cell_m` (each cluster at the
+    /// mean of its vertices), triangles whose corners fell into fewer than three clusters
+    /// dropped. Every vertex moves less than a cell diagonal; the topology may change at that
+    /// scale, which a view does not show.
+    pub fn clustered(&self, cell_m: f32) -> TriMesh {
+        let mut cluster_of = Vec::with_capacity(self.vertices.len());
+        let mut index = std::collections::HashMap::new();
+        let mut sums: Vec<([f64; 3], u32)> = Vec::new();
+        for v in &self.vertices {
+            let key = v.map(|x| (x / cell_m).floor() as i64);
+            let k = *index.entry(key).or_insert_with(|| {
+                sums.push(([0.0; 3], 0));
+                (sums.len() - 1) as u32
+            });
+            let s = &mut sums[k as usize];
+            for a in 0..3 {
+                s.0[a] += f64::from(v[a]);
+            }
+            s.1 += 1;
+            cluster_of.push(k);
+        }
+        let vertices = sums
+            .iter()
+            .map(|(s, n)| s.map(|x| (x / f64::from(*n)) as f32))
+            .collect();
+        let mut seen = std::collections::HashSet::new();
+        let triangles = self
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| cluster_of[i as usize]))
+            .filter(|[a, b, c]| a != b && b != c && a != c)
+            .filter(|t| {
+                // One copy of a triangle that several fine ones collapsed onto.
+                let mut key = *t;
+                key.sort_unstable();
+                seen.insert(key)
+            })
+            .collect();
+        TriMesh {
+            vertices,
+            triangles,
+        }
+    }
+
     /// Axis-aligned bounds `(min, max)`, or `None` for an empty mesh.
     pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
         let first = *self.vertices.first()?;
@@ -224,6 +268,65 @@ pub fn unit_cube() -> TriMesh {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn clustering_keeps_the_shape_with_fewer_vertices() {
+        // A finely subdivided unit cube (each face a 20 × 20 grid): 2,402 vertices.
+        let n = 20u32;
+        let mut m = TriMesh {
+            vertices: vec![],
+            triangles: vec![],
+        };
+        for axis in 0..3 {
+            for side in [0.0f32, 1.0] {
+                let base = m.vertices.len() as u32;
+                for i in 0..=n {
+                    for j in 0..=n {
+                        let mut v = [0.0f32; 3];
+                        v[axis] = side;
+                        v[(axis + 1) % 3] = i as f32 / n as f32;
+                        v[(axis + 2) % 3] = j as f32 / n as f32;
+                        m.vertices.push(v);
+                    }
+                }
+                for i in 0..n {
+                    for j in 0..n {
+                        let a = base + i * (n + 1) + j;
+                        m.triangles.push([a, a + 1, a + n + 1]);
+                        m.triangles.push([a + 1, a + n + 2, a + n + 1]);
+                    }
+                }
+            }
+        }
+        let c = m.clustered(0.25);
+        assert!(c.validate().is_ok());
+        assert!(
+            c.vertices.len() < m.vertices.len() / 10,
+            "{}",
+            c.vertices.len()
+        );
+        assert!(c.triangles.len() > 50, "{}", c.triangles.len());
+        // Every vertex stays within a cell of the cube's surface and inside its bounds.
+        for v in &c.vertices {
+            assert!(v.iter().all(|x| (-1e-6..=1.0 + 1e-6).contains(x)), "{v:?}");
+            let to_surface = v.iter().map(|x| x.min(1.0 - x)).fold(f32::MAX, f32::min);
+            assert!(to_surface < 0.25 * 3f32.sqrt(), "{v:?}");
+        }
+        // No degenerate or duplicate triangles.
+        let mut keys: Vec<[u32; 3]> = c
+            .triangles
+            .iter()
+            .map(|t| {
+                let mut k = *t;
+                k.sort_unstable();
+                k
+            })
+            .collect();
+        assert!(keys.iter().all(|[a, b, c]| a != b && b != c));
+        keys.sort_unstable();
+        keys.dedup();
+        assert_eq!(keys.len(), c.triangles.len());
+    }
     use super::*;
 
     #[test]

@@ -1,4 +1,4 @@
-//! The renderer benchmark scene `shared/bench/scene_sphere160.json` (DESIGN.md §7): a
+//! The renderer benchmark scene `assets/bench/scene_sphere160.json` (DESIGN.md §7): a
 //! 160×120 camera, a mirror sphere, the 26,756-triangle MakeHuman body, σ, and masks.
 
 use crate::sdf::{PlacedSdf, Sphere};

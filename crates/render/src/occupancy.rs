@@ -1,5 +1,5 @@
 //! Soft occupancy of reflected half-lines by a triangle mesh, the soft-IoU loss, and the
-//! hand-written backward (paper §3.4; `shared/bench/scene_sphere160.json`, `occupancy` block).
+//! hand-written backward (paper §3.4; `assets/bench/scene_sphere160.json`, `occupancy` block).
 //!
 //! `x_ij = λ_ij d_ij² / σ`, `D_ij = sigmoid(x_ij)`, `I_i = 1 − Π_j (1 − D_ij)`, with λ = +1 when
 //! the half-line pierces triangle j (then d is the distance to the triangle's boundary) and −1

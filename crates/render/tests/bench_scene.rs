@@ -1,4 +1,4 @@
-//! The reference scene (`shared/bench/scene_sphere160.json`): the traced mirror sphere gives
+//! The reference scene (`assets/bench/scene_sphere160.json`): the traced mirror sphere gives
 //! the stated number of reflected rays and the hard renderer reproduces the reference mask.
 
 use irmirror_geom::Rigid3;
@@ -9,9 +9,9 @@ use std::path::PathBuf;
 
 #[test]
 fn hard_mask_reproduces_the_reference() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/bench/scene_sphere160.json");
-    let scene = BenchScene::load(&path).expect("shared/ sits beside the checkout");
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../assets/bench/scene_sphere160.json");
+    let scene = BenchScene::load(&path).expect("the reference scene ships in assets/bench/");
     let trace = TraceParams {
         coarse_tol_rel: 1e-6,
         method: SurfaceMethod::SphereTrace { steps: 3 },

@@ -33,8 +33,9 @@ pub enum Regime {
     /// Paper-like: the side of a car seen by a Boson-class 640×512, 50° camera from 1.5–3 m; a
     /// pedestrian 2.5–8 m from the car, any facing.
     Car,
-    /// Hard: a Lepton-class 160×120, 57° camera 0.7 m from the table (1–3 objects spread over
-    /// 40 cm); reflections of 10–25 pixels.
+    /// Hard: a Lepton-class 160×120, 57° camera 0.55 m above and 0.45 m back from a table
+    /// (1–3 objects spread over 40 cm); the person 0.5–1.5 m behind the cameras; reflections of
+    /// 10–25 pixels.
     TabletopWide,
 }
 

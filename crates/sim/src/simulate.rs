@@ -49,6 +49,8 @@ pub struct Simulation {
     pub radiance: (Image<f64>, Image<f64>),
     /// Truth: thermal pixels whose reflection shows the person.
     pub reflection_mask: Image<bool>,
+    /// Truth: thermal pixels whose pixel-centre ray hits an object.
+    pub thermal_object_pixels: Image<bool>,
     /// Depth, 16-bit mm.
     pub depth: Image<u16>,
     /// Shaded RGB of the depth view.
@@ -73,13 +75,13 @@ fn rigid(f: &RigidFile, what: &str) -> Result<Rigid3<f64>, SimError> {
 }
 
 /// Thermal pixels whose pixel-centre ray reflects off an object onto the person (the truth
-/// reflection mask), and how many pixels see an object at all, and whether any sees the person
+/// reflection mask), the pixels that see an object at all, and whether any sees the person
 /// directly.
 fn reflection_truth(
     world: &World,
     camera: &irmirror_geom::PinholeCamera,
     depth_from_thermal: &Rigid3<f64>,
-) -> (Vec<bool>, usize, bool) {
+) -> (Vec<bool>, Vec<bool>, bool) {
     use rayon::prelude::*;
     let per_pixel: Vec<(bool, bool, bool)> = (0..camera.width * camera.height)
         .into_par_iter()
@@ -108,7 +110,7 @@ fn reflection_truth(
         .collect();
     (
         per_pixel.iter().map(|x| x.0).collect(),
-        per_pixel.iter().filter(|x| x.1).count(),
+        per_pixel.iter().map(|x| x.1).collect(),
         per_pixel.iter().any(|x| x.2),
     )
 }
@@ -197,7 +199,13 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
     let background = thermal_counts(&rad_without, s, ambient_k, &mut rng_bg);
 
     // Truth reflection mask (pixel-centre rays, first mirror bounce) and direct visibility.
-    let (mask, object_pixels, mut direct) = reflection_truth(&with, &tcam, &depth_from_thermal);
+    let (mask, on_objects, mut direct) = reflection_truth(&with, &tcam, &depth_from_thermal);
+    let object_pixels = on_objects.iter().filter(|o| **o).count();
+    let thermal_object_pixels = Image {
+        width: tcam.width,
+        height: tcam.height,
+        data: on_objects,
+    };
     let rises: Vec<f64> = mask
         .iter()
         .enumerate()
@@ -278,15 +286,21 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
                 let ray = depth_from_third.transform_ray(
                     &third_cam.pixel_ray::<f64>(p % third_cam.width, p / third_cam.width),
                 );
-                let c: [u8; 3] = match with.hit(&ray) {
-                    Some(h) if matches!(h.surface, Surface::Person { .. }) => {
-                        let g = (60.0 + 190.0 * h.normal.dot(&ray.dir).abs()) as u8;
-                        [g, (f64::from(g) * 0.8) as u8, (f64::from(g) * 0.7) as u8]
+                // Each surface its own colour (objects blue, as in irmirror's views), Lambert
+                // shaded from the eye.
+                match with.hit(&ray) {
+                    Some(h) => {
+                        let albedo: [f64; 3] = match h.surface {
+                            Surface::Person { .. } => [250.0, 200.0, 175.0],
+                            Surface::Object(_) => [90.0, 140.0, 230.0],
+                            Surface::Table => [150.0, 130.0, 110.0],
+                            Surface::Heat(_) => [230.0, 60.0, 40.0],
+                        };
+                        let shade = 0.3 + 0.7 * h.normal.dot(&ray.dir).abs();
+                        albedo.map(|c| (c * shade).clamp(0.0, 255.0) as u8)
                     }
-                    Some(_) => [120, 120, 130],
                     None => [235, 235, 240],
-                };
-                c
+                }
             })
             .collect();
         image::RgbImage::from_raw(third_cam.width, third_cam.height, px).expect("sizes match")
@@ -316,6 +330,7 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
         background,
         radiance: (rad_with, rad_without),
         reflection_mask,
+        thermal_object_pixels,
         depth,
         rgb,
         masks,
@@ -457,15 +472,18 @@ impl Simulation {
         let pv = dir.join("preview");
         mk(&pv)?;
         let (rw, rb) = &self.radiance;
-        let tk = rw.map(temperature_of);
-        let (lo, hi) = tk
-            .data
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        // The recorded frame (counts, noise included) stretched on the objects, where the
+        // reflections are, not on the whole room.
+        write_gray8_png(
+            &irmirror_capture::image_io::stretch_percentiles(
+                &self.thermal.map(f64::from),
+                &self.thermal_object_pixels,
+            ),
+            &pv.join("thermal.png"),
+        )?;
         let stretch = |v: f64, lo: f64, hi: f64| {
             ((v - lo) / (hi - lo).max(1e-9) * 255.0).clamp(0.0, 255.0) as u8
         };
-        write_gray8_png(&tk.map(|v| stretch(v, lo, hi)), &pv.join("thermal.png"))?;
         let rise: Vec<f64> = rw
             .data
             .iter()

@@ -9,7 +9,8 @@ use super::{
 };
 use crate::EvalError;
 use crate::output::{Staging, save_png, write_text};
-use crate::score::{Evaluation, evaluate, fitted_mask, third_view};
+use crate::score::{Evaluation, evaluate, fitted_mask, object_poses, third_view};
+use crate::truth::Truth;
 use crate::views::{object_mesh, overlay};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
@@ -41,6 +42,7 @@ fn chamfer_mm2(a: &irmirror_geom::TriMesh, b: &irmirror_geom::TriMesh) -> f64 {
 pub(super) struct Prepared {
     pub(super) scene: SceneFile,
     pub(super) sim: Simulation,
+    pub(super) truth: Truth,
     pub(super) capture: Capture,
     pub(super) pre: Preprocessed,
     /// When stage 0 started (stage 0–1 time).
@@ -150,6 +152,7 @@ fn prepare(
             Ok(pre) => {
                 return Ok(Prepared {
                     scene,
+                    truth: Truth::from_simulation(&sim)?,
                     sim,
                     capture,
                     pre,
@@ -239,14 +242,19 @@ fn run_capture(
         let time_s = t0.elapsed().as_secs_f64();
         let body = posed_body(model, prior, &rec.states[0])?;
         let mask = fitted_mask(model, &rec.rays, &body);
-        let eval = Some(evaluate(&p.sim, &body, &mask, &rec.objects)?);
+        let eval = Some(evaluate(
+            &p.truth,
+            &body,
+            &mask,
+            &object_poses(&rec.objects),
+        )?);
         if variant == Variant::Full {
             result.diagnosis = Some(diagnose(p, priors, &rec, (seed, &cfg))?);
             save_png(
                 &overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
                 &thumbs.join("overlay.png"),
             )?;
-            let view = third_view(&p.sim, model, &body, &rec.objects)?;
+            let view = third_view(&p.truth, model, &body, &rec.objects);
             save_png(
                 &image::imageops::thumbnail(&view, 160, 120),
                 &thumbs.join("third.png"),
@@ -279,6 +287,7 @@ fn random_baseline(
             p.scene.person.rotvec_rad[0],
         ));
     let rays = irmirror_recon::pipeline::reflected_rays(&p.capture, objects, &p.pre.mask, cfg);
+    let poses = object_poses(objects);
     (0..RANDOM_DRAWS)
         .map(|_| {
             let latent: Vec<f64> = (0..irmirror_body::prior::LATENT)
@@ -292,7 +301,7 @@ fn random_baseline(
             };
             let body = posed_body(model, prior, &st)?;
             let mask = fitted_mask(model, &rays, &body);
-            evaluate(&p.sim, &body, &mask, objects)
+            evaluate(&p.truth, &body, &mask, &poses)
         })
         .collect()
 }
