@@ -2,7 +2,7 @@
 //! capture back through the validating loader, reconstructs it (stages 0–2), evaluates the fit
 //! against the simulator's truth, and writes everything with an HTML report and the run record.
 
-use crate::output::{Staging, save_png, write_text};
+use crate::output::{Staging, write_text};
 use crate::reconstruct_cmd::Bars;
 use crate::simulate_cmd::regime_scene;
 use anyhow::{Context, Result};
@@ -28,7 +28,6 @@ struct RunRecord<'a> {
 }
 
 use irmirror_eval::Truth;
-use irmirror_eval::score::{object_poses, third_view};
 
 /// Runs the demo into `out`.
 pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
@@ -60,7 +59,7 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
     // The truth is read only after the reconstruction, from the capture's files as `score`
     // reads them: for the evaluation and the 3-D scene.
     let truth = Truth::load(&capture_dir, &model)?;
-    let written = crate::result::write(
+    let (_, scored) = crate::result::write_scored(
         &stage,
         "",
         &crate::result::ResultInputs {
@@ -74,27 +73,13 @@ pub fn run(out: &Path, seed: u64, progress: bool) -> Result<()> {
             truth: Some(&truth),
         },
     )?;
+    let scored = scored.context("the demo's capture carries its truth")?;
     for ext in ["ply", "obj", "glb"] {
         sim.body
             .mesh
             .write(&stage.path(&format!("person_truth.{ext}")))?;
     }
 
-    let best = &written.best;
-    let scored = irmirror_eval::score(
-        &truth,
-        &written.hypotheses,
-        &written.fitted_mask,
-        &object_poses(&rec.objects),
-    )?;
-    write_text(
-        &stage.path("eval.json"),
-        &serde_json::to_string_pretty(&scored)?,
-    )?;
-    save_png(
-        &third_view(&truth, &model, best, &rec.objects),
-        &stage.path("views/third_camera.png"),
-    )?;
     let eval = &scored.best;
 
     let scene_text = toml::to_string(&scene)?;

@@ -1,13 +1,12 @@
 //! `irmirror reconstruct`: the pipeline on a capture (stages 0–2, or up to a stage).
 
-use crate::output::{Staging, save_png, write_text};
+use crate::output::{Staging, write_text};
 use anyhow::{Context, Result};
 use clap::ValueEnum;
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
 use irmirror_capture::{Capture, Image, write_gray8_png};
 use irmirror_eval::Truth;
-use irmirror_eval::score::{object_poses, third_view};
 use irmirror_recon::objects::reconstruct_objects;
 use irmirror_recon::pipeline::{
     Ablation, BodyPriors, Progress, ReconConfig, Reconstruction, reconstruct,
@@ -224,7 +223,7 @@ pub fn run(
             } else {
                 None
             };
-            let written = crate::result::write(
+            let (_, scored) = crate::result::write_scored(
                 &st,
                 "",
                 &crate::result::ResultInputs {
@@ -238,26 +237,6 @@ pub fn run(
                     truth: truth.as_ref(),
                 },
             )?;
-            let scored = match &truth {
-                Some(truth) => {
-                    let scored = irmirror_eval::score(
-                        truth,
-                        &written.hypotheses,
-                        &written.fitted_mask,
-                        &object_poses(&rec.objects),
-                    )?;
-                    write_text(
-                        &st.path("eval.json"),
-                        &serde_json::to_string_pretty(&scored)?,
-                    )?;
-                    save_png(
-                        &third_view(truth, &model, &written.best, &rec.objects),
-                        &st.path("views/third_camera.png"),
-                    )?;
-                    Some(scored)
-                }
-                None => None,
-            };
             let html = format!(
                 "{}<h1>irmirror reconstruction</h1><p>Capture: <code>{}</code>; reconstruction seed {seed}; irmirror {}. \
                  Settings: <a href=\"run.toml\">run.toml</a>.</p>{}{}</body></html>",

@@ -6,8 +6,9 @@ use crate::scene3d::{Part, camera_mesh, colour, display_mesh};
 use anyhow::Result;
 use irmirror_body::PosedBody;
 use irmirror_capture::{Capture, Image, write_gray8_png};
-use irmirror_eval::Truth;
+use irmirror_eval::score::{object_poses, third_view};
 use irmirror_eval::views::{Drawn, object_mesh, overlay, reflection_zoom, render_view, stretched};
+use irmirror_eval::{Scored, Truth};
 use irmirror_geom::nalgebra::Vector3;
 use irmirror_geom::{PinholeCamera, Rigid3};
 use irmirror_recon::human::posed_body;
@@ -258,6 +259,39 @@ pub fn write(stage: &Staging, prefix: &str, inputs: &ResultInputs<'_>) -> Result
         hypotheses,
         fitted_mask,
     })
+}
+
+/// [`write`], then, when the inputs carry the simulator's truth, the result scored against it:
+/// `eval.json` and the evaluation camera's view (`views/third_camera.png`).
+pub fn write_scored(
+    stage: &Staging,
+    prefix: &str,
+    inputs: &ResultInputs<'_>,
+) -> Result<(Written, Option<Scored>)> {
+    let written = write(stage, prefix, inputs)?;
+    let Some(truth) = inputs.truth else {
+        return Ok((written, None));
+    };
+    let scored = irmirror_eval::score(
+        truth,
+        &written.hypotheses,
+        &written.fitted_mask,
+        &object_poses(&inputs.rec.objects),
+    )?;
+    write_text(
+        &stage.path(&format!("{prefix}eval.json")),
+        &serde_json::to_string_pretty(&scored)?,
+    )?;
+    save_png(
+        &third_view(
+            truth,
+            inputs.priors.model,
+            &written.best,
+            &inputs.rec.objects,
+        ),
+        &stage.path(&format!("{prefix}views/third_camera.png")),
+    )?;
+    Ok((written, Some(scored)))
 }
 
 /// A camera beside the scene, level with the support plane, that sees the objects and the

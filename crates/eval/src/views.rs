@@ -90,16 +90,45 @@ pub fn reflection_zoom(rise_k: &Image<f64>, observed: &Image<bool>, fitted: &[bo
         .zip(fitted)
         .map(|(a, b)| *a || *b)
         .collect();
-    let [x0, y0, x1, y1] = largest_piece_box(&union, w, h);
-    let pad = 3;
-    let (x0, y0) = (x0.saturating_sub(pad), y0.saturating_sub(pad));
-    let (x1, y1) = ((x1 + pad).min(w - 1), (y1 + pad).min(h - 1));
-    let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
-    let k = (240 / ch).clamp(1, 24).min((300 / cw).max(1));
-    let peak = (0..ch)
-        .flat_map(|y| (0..cw).map(move |x| ((y0 + y) * w + x0 + x) as usize))
+    let crop = padded(largest_piece_box(&union, w, h), w, h);
+    let [x0, y0, x1, y1] = crop;
+    let peak = (y0..=y1)
+        .flat_map(|y| (x0..=x1).map(move |x| (y * w + x) as usize))
         .map(|i| rise_k.data[i])
         .fold(1e-9, f64::max);
+    three_panels(crop, w, 300, |panel, i| {
+        let g = (rise_k.data[i].max(0.0) / peak * 160.0) as u8;
+        match (panel, observed.data[i], fitted[i]) {
+            (0, true, _) | (2, true, false) => Rgb([40, 220, 60]),
+            (1, _, true) | (2, false, true) => Rgb([230, 40, 220]),
+            (2, true, true) => Rgb([255, 255, 255]),
+            _ => Rgb([g, g, g]),
+        }
+    })
+}
+
+/// `bx` grown by 3 pixels on every side, inside the `w × h` image.
+fn padded([x0, y0, x1, y1]: [u32; 4], w: u32, h: u32) -> [u32; 4] {
+    let pad = 3;
+    [
+        x0.saturating_sub(pad),
+        y0.saturating_sub(pad),
+        (x1 + pad).min(w - 1),
+        (y1 + pad).min(h - 1),
+    ]
+}
+
+/// Three panels of the image region `crop` (inclusive box; image width `w`) side by side,
+/// enlarged by nearest neighbour to ≈ 240 pixels high and at most `max_w` wide each, separated
+/// by 4-pixel black bars; `pixel(panel, i)` colours image pixel `i` in a panel.
+fn three_panels(
+    [x0, y0, x1, y1]: [u32; 4],
+    w: u32,
+    max_w: u32,
+    pixel: impl Fn(u32, usize) -> Rgb<u8>,
+) -> RgbImage {
+    let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
+    let k = (240 / ch).clamp(1, 24).min((max_w / cw).max(1));
     let (gap, pw) = (4, cw * k);
     RgbImage::from_fn(3 * pw + 2 * gap, ch * k, |x, y| {
         let panel = x / (pw + gap);
@@ -107,15 +136,7 @@ pub fn reflection_zoom(rise_k: &Image<f64>, observed: &Image<bool>, fitted: &[bo
         if xin >= pw {
             return Rgb([0, 0, 0]);
         }
-        let i = ((y0 + y / k) * w + x0 + xin / k) as usize;
-        let g = (rise_k.data[i].max(0.0) / peak * 160.0) as u8;
-        let (o, f) = (observed.data[i], fitted[i]);
-        match (panel, o, f) {
-            (0, true, _) | (2, true, false) => Rgb([40, 220, 60]),
-            (1, _, true) | (2, false, true) => Rgb([230, 40, 220]),
-            (2, true, true) => Rgb([255, 255, 255]),
-            _ => Rgb([g, g, g]),
-        }
+        pixel(panel, ((y0 + y / k) * w + x0 + xin / k) as usize)
     })
 }
 
@@ -143,21 +164,8 @@ pub fn rise_panels(observed: &Image<f64>, fitted: &Image<f64>, mask: &Image<bool
         .filter(|(_, m)| **m)
         .map(|(r, _)| *r)
         .fold(1e-9, f64::max);
-    let [x0, y0, x1, y1] = largest_piece_box(&mask.data, w, h);
-    let pad = 3;
-    let (x0, y0) = (x0.saturating_sub(pad), y0.saturating_sub(pad));
-    let (x1, y1) = ((x1 + pad).min(w - 1), (y1 + pad).min(h - 1));
-    let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
-    let k = (240 / ch).clamp(1, 24).min((400 / cw).max(1));
-    let gap = 4;
-    let pw = cw * k;
-    RgbImage::from_fn(3 * pw + 2 * gap, ch * k, |x, y| {
-        let panel = x / (pw + gap);
-        let xin = x % (pw + gap);
-        if xin >= pw {
-            return Rgb([0, 0, 0]);
-        }
-        let i = ((y0 + y / k) * w + x0 + xin / k) as usize;
+    let crop = padded(largest_piece_box(&mask.data, w, h), w, h);
+    three_panels(crop, w, 400, |panel, i| {
         let grey = |v: f64| {
             let g = (v.max(0.0) / peak * 255.0).min(255.0) as u8;
             Rgb([g, g, g])
