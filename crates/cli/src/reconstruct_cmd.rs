@@ -217,11 +217,15 @@ pub fn run(
             )
             .with_context(ctx)?;
             bars.finish();
-            // A simulated capture carries its truth: score against it (read only here).
-            let truth = if Truth::exists(capture_dir) {
-                Some(Truth::load(capture_dir, &model)?)
+            // A simulated capture carries its truth: score against it (read only here). A
+            // truth that does not read leaves the reconstruction unscored, not unwritten.
+            let (truth, unscored) = if Truth::exists(capture_dir) {
+                match Truth::load(capture_dir, &model) {
+                    Ok(t) => (Some(t), None),
+                    Err(e) => (None, Some(e.to_string())),
+                }
             } else {
-                None
+                (None, None)
             };
             let (_, scored) = crate::result::write_scored(
                 &st,
@@ -255,6 +259,9 @@ pub fn run(
             print_summary(&rec);
             if let Some(scored) = &scored {
                 println!("against the capture's truth:\n{}", scored.text());
+            }
+            if let Some(why) = unscored {
+                println!("note: not scored against the capture's truth: {why}");
             }
             println!("wrote {} in {secs:.1} s (open report.html)", dir.display());
         }

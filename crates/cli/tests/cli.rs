@@ -604,6 +604,25 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
     std::fs::remove_file(&bad).ok();
     std::fs::remove_dir_all(&out2).ok();
     std::fs::remove_dir_all(&out3).ok();
+    // A truth that does not read leaves the result unscored (with a warning), not unwritten.
+    std::fs::write(cap.join("truth/body.json"), "{ not json").unwrap();
+    let out5 = tmp("rec-out5");
+    let o = irmirror(&[
+        "reconstruct",
+        cap.to_str().unwrap(),
+        "--out",
+        out5.to_str().unwrap(),
+    ]);
+    assert!(
+        o.status.success()
+            && String::from_utf8_lossy(&o.stdout)
+                .contains("not scored against the capture's truth")
+            && out5.join("params.json").exists()
+            && !out5.join("eval.json").exists(),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_dir_all(&out5).ok();
     // A capture whose thermal frame equals its background: no reflection, clear error, no output.
     std::fs::copy(cap.join("thermal_background.png"), cap.join("thermal.png")).unwrap();
     for stage in ["preprocess", "full"] {
