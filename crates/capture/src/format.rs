@@ -149,3 +149,41 @@ pub struct ExtraCamera {
     /// This camera's frame → depth-camera frame.
     pub depth_from_camera: RigidFile,
 }
+
+/// `rig.toml`, written by `irmirror capture calibrate` and read by `irmirror capture import`:
+/// capture.toml's two camera tables (copy them into a capture.toml as they are) and how well the
+/// calibration fits.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RigFile {
+    /// The depth camera, as given to the calibration.
+    pub depth_camera: CameraSpec,
+    /// The thermal camera: intrinsics and `depth_from_thermal`, as calibrated.
+    pub thermal_camera: ThermalCameraSpec,
+    /// The calibration's fit (absent when the file was written by hand).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<RigFit>,
+}
+
+/// How well a calibration fits its views.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RigFit {
+    /// Views used (both cameras saw the whole board).
+    pub views: usize,
+    /// Views skipped, with the reason.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub skipped: Vec<String>,
+    /// The board: inner corners and square size.
+    pub board: String,
+    /// RMS reprojection error of the thermal corners, pixels.
+    pub rms_thermal_px: f64,
+    /// RMS reprojection error of the depth camera's corners, pixels.
+    pub rms_depth_px: f64,
+    /// One-σ uncertainty of fx, fy, cx, cy, pixels.
+    pub intrinsics_sd_px: [f64; 4],
+    /// One-σ uncertainty of the extrinsic's rotation, degrees (largest axis).
+    pub rotation_sd_deg: f64,
+    /// One-σ uncertainty of the extrinsic's translation, millimetres (largest axis).
+    pub translation_sd_mm: f64,
+}

@@ -127,6 +127,32 @@ pub fn read_float(path: &Path) -> Result<Image<f64>, CaptureError> {
     }
 }
 
+/// Reads any single image as grey values: `.npy` and float TIFF as [`read_float`], 16-bit
+/// grey as counts, 8-bit grey or colour as luma (0–255). For calibration images, whose units do
+/// not matter.
+pub fn read_gray_any(path: &Path) -> Result<Image<f64>, CaptureError> {
+    if path.extension().and_then(|e| e.to_str()) == Some("npy") {
+        return read_float(path);
+    }
+    let img = decode(path)?;
+    let (width, height) = (img.width(), img.height());
+    let data = match img {
+        DynamicImage::ImageLuma16(i) => i.into_raw().into_iter().map(f64::from).collect(),
+        DynamicImage::ImageRgb32F(i) => i.pixels().map(|p| f64::from(p[0])).collect(),
+        other => other
+            .into_luma8()
+            .into_raw()
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+    };
+    Ok(Image {
+        width,
+        height,
+        data,
+    })
+}
+
 /// `img` as 8-bit grey, stretched between its 1st and 99th percentiles inside `region` (the
 /// whole image when the region is empty or has no finite value), so that a reflection a few
 /// tenths of a kelvin warm shows against a room tens of kelvin wide. Pixels outside a non-empty

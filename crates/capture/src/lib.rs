@@ -15,16 +15,18 @@
 //! [`Capture::load`] validates everything and names the file and field of every problem; it never
 //! writes to the capture directory.
 
+pub mod flir;
 pub mod format;
 pub mod image_io;
 mod load;
+pub mod opencv;
 pub mod planck;
 
 pub use format::{
-    CameraSpec, CaptureFile, DepthSpec, ExtraCamera, FORMAT, ObjectSpec, RgbSpec,
+    CameraSpec, CaptureFile, DepthSpec, ExtraCamera, FORMAT, ObjectSpec, RgbSpec, RigFile, RigFit,
     ThermalCameraSpec, ThermalSpec, ThermalUnits,
 };
-pub use image_io::{Image, read_gray16_png, write_gray8_png, write_gray16_png};
+pub use image_io::{Image, read_gray_any, read_gray16_png, write_gray8_png, write_gray16_png};
 pub use load::{Capture, CapturedObject};
 
 use std::path::PathBuf;

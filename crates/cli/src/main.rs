@@ -5,6 +5,7 @@ mod bench_objects;
 mod bench_regimes;
 mod bench_render;
 mod body_cmd;
+mod capture_cmd;
 mod demo;
 mod eval_cmd;
 mod output;
@@ -243,6 +244,14 @@ enum Command {
         #[command(subcommand)]
         command: body_cmd::BodyCommand,
     },
+    /// Real rigs: calibrate a thermal + RGB-D rig, import a real camera's files, simulate
+    /// calibration views (docs/real-captures.md).
+    ///
+    /// Example: irmirror capture calibrate calib/ --square-mm 35 --depth-camera depth.json
+    Capture {
+        #[command(subcommand)]
+        command: capture_cmd::CaptureCommand,
+    },
     /// Benchmarks that print a table.
     ///
     /// Example: irmirror bench regimes --seeds 50 --png regimes.png
@@ -309,6 +318,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Demo { out, seed } => demo::run(&out, seed, progress),
         Command::Body { command } => body_cmd::run(command, progress),
+        Command::Capture { command } => capture_cmd::run(command),
         Command::Simulate {
             regime,
             scene,

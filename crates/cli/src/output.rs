@@ -1,7 +1,9 @@
 //! Preview images; result directories and their files come from `irmirror_eval::output`.
 
+use anyhow::{Context, Result, bail};
 use image::RgbImage;
 pub use irmirror_eval::output::{Staging, save_png, write_text};
+use std::path::Path;
 
 /// A file the repository ships (reference data the commands use by default), at the path of the
 /// checkout the binary was built from.
@@ -50,4 +52,39 @@ pub fn preview_sheet(meshes: &[&TriMesh], size: u32) -> RgbImage {
         );
     }
     sheet
+}
+
+/// Writes `text` to `path` whole or not at all, refusing a path inside any of `inputs` (`flag`
+/// names the option in messages).
+pub fn write_file_atomic(path: &Path, flag: &str, inputs: &[&Path], text: &str) -> Result<()> {
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let parent = parent
+        .canonicalize()
+        .with_context(|| format!("{flag} {}: its directory does not exist", path.display()))?;
+    for input in inputs {
+        if let Ok(i) = input.canonicalize()
+            && parent.starts_with(&i)
+        {
+            bail!(
+                "{flag} {} lies inside the input {}: inputs are never modified",
+                path.display(),
+                input.display()
+            );
+        }
+    }
+    let name = path
+        .file_name()
+        .with_context(|| format!("{flag} {} names no file", path.display()))?;
+    let tmp = parent.join(format!(
+        ".{}.partial-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    write_text(&tmp, text)?;
+    std::fs::rename(&tmp, parent.join(name))
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
 }

@@ -129,16 +129,7 @@ pub fn run(
         Stage::Preprocess => {
             let pre = preprocess(&capture, &cfg.preprocess).with_context(ctx)?;
             std::fs::create_dir_all(st.path("debug"))?;
-            let max = pre.rise_k.data.iter().copied().fold(1e-9, f64::max);
-            write_gray8_png(
-                &pre.rise_k
-                    .map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8),
-                &st.path("debug/rise.png"),
-            )?;
-            mask_png(&pre.object_pixels, &st.path("debug/object_pixels.png"))?;
-            mask_png(&pre.raw_mask, &st.path("debug/mask_raw.png"))?;
-            mask_png(&pre.mask, &st.path("reflection_mask.png"))?;
-            mask_png(&pre.edges, &st.path("debug/edges.png"))?;
+            crate::result::write_stage0(&capture, &pre, &|n| st.path(n))?;
             let n = pre.mask.data.iter().filter(|m| **m).count();
             write_record(
                 &st,

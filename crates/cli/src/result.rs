@@ -13,8 +13,40 @@ use irmirror_geom::nalgebra::Vector3;
 use irmirror_geom::{PinholeCamera, Rigid3};
 use irmirror_recon::human::posed_body;
 use irmirror_recon::pipeline::{BodyPriors, Reconstruction};
+use irmirror_recon::preprocess::Preprocessed;
 use irmirror_render::bvh::Bvh;
 use irmirror_render::hard::hard_mask;
+
+/// Stage 0's files: `reflection_mask.png` and `debug/` (rise, object pixels, raw mask, edges,
+/// and the depth image's edges over the thermal frame, to check the calibration). `p` maps a
+/// name to its path in the result; `debug/` must exist.
+pub fn write_stage0(
+    capture: &Capture,
+    pre: &Preprocessed,
+    p: &dyn Fn(&str) -> std::path::PathBuf,
+) -> Result<()> {
+    let max = pre.rise_k.data.iter().copied().fold(1e-9, f64::max);
+    write_gray8_png(
+        &pre.rise_k
+            .map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8),
+        &p("debug/rise.png"),
+    )?;
+    mask_png(&pre.object_pixels, &p("debug/object_pixels.png"))?;
+    mask_png(&pre.raw_mask, &p("debug/mask_raw.png"))?;
+    mask_png(&pre.edges, &p("debug/edges.png"))?;
+    save_png(
+        &irmirror_eval::views::depth_edges_on_thermal(
+            &capture.thermal_k,
+            &capture.depth_m,
+            &capture.depth_camera,
+            &capture.thermal_camera,
+            &capture.depth_from_thermal,
+        ),
+        &p("debug/depth_edges_on_thermal.png"),
+    )?;
+    mask_png(&pre.mask, &p("reflection_mask.png"))?;
+    Ok(())
+}
 
 fn mask_png(img: &Image<bool>, path: &std::path::Path) -> Result<()> {
     write_gray8_png(&img.map(|b| if b { 255 } else { 0 }), path)?;
@@ -61,16 +93,7 @@ pub fn write(stage: &Staging, prefix: &str, inputs: &ResultInputs<'_>) -> Result
     }
     // Stage 0.
     let pre = &rec.pre;
-    let max = pre.rise_k.data.iter().copied().fold(1e-9, f64::max);
-    write_gray8_png(
-        &pre.rise_k
-            .map(|r| (r / max * 255.0).clamp(0.0, 255.0) as u8),
-        &p("debug/rise.png"),
-    )?;
-    mask_png(&pre.object_pixels, &p("debug/object_pixels.png"))?;
-    mask_png(&pre.raw_mask, &p("debug/mask_raw.png"))?;
-    mask_png(&pre.edges, &p("debug/edges.png"))?;
-    mask_png(&pre.mask, &p("reflection_mask.png"))?;
+    write_stage0(capture, pre, &p)?;
     // The thermal frame as a person sees it: stretched on the objects, not on the room.
     save_png(
         &stretched(&capture.thermal_radiance(), &pre.object_pixels),

@@ -1,7 +1,6 @@
 //! `irmirror score`: a reconstruction's figures against a simulated capture's truth, from the
 //! files alone (`params.json` and `fitted_mask.png` of the result, `truth/` of the capture).
 
-use crate::output::write_text;
 use anyhow::{Context, Result, bail};
 use irmirror_body::prior::PosePrior;
 use irmirror_body::{BodyModel, PosedBody};
@@ -127,40 +126,6 @@ pub fn read_result(dir: &Path, model: &BodyModel, prior: &PosePrior) -> Result<R
     })
 }
 
-/// Writes `text` to `path` whole or not at all, refusing a path inside any of `inputs`.
-fn write_json(path: &Path, inputs: &[&Path], text: &str) -> Result<()> {
-    let parent = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let parent = parent
-        .canonicalize()
-        .with_context(|| format!("--json {}: its directory does not exist", path.display()))?;
-    for input in inputs {
-        if let Ok(i) = input.canonicalize()
-            && parent.starts_with(&i)
-        {
-            bail!(
-                "--json {} lies inside the input {}: inputs are never modified",
-                path.display(),
-                input.display()
-            );
-        }
-    }
-    let name = path
-        .file_name()
-        .with_context(|| format!("--json {} names no file", path.display()))?;
-    let tmp = parent.join(format!(
-        ".{}.partial-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    write_text(&tmp, text)?;
-    std::fs::rename(&tmp, parent.join(name))
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
-}
-
 /// Scores `result` against the truth of `capture`; prints the table and writes `json` if given.
 pub fn run(result: &Path, capture: &Path, json: Option<&Path>) -> Result<Scored> {
     if !Truth::exists(capture) {
@@ -176,8 +141,9 @@ pub fn run(result: &Path, capture: &Path, json: Option<&Path>) -> Result<Scored>
     let scored = irmirror_eval::score(&truth, &files.hypotheses, &files.mask, &files.objects)
         .with_context(|| format!("scoring {} against {}", result.display(), capture.display()))?;
     if let Some(path) = json {
-        write_json(
+        crate::output::write_file_atomic(
             path,
+            "--json",
             &[result, capture],
             &serde_json::to_string_pretty(&scored)?,
         )?;

@@ -37,9 +37,13 @@ fn help_explains_every_command() {
         "train-sdf",
         "body",
         "bench",
+        "capture",
+        "capture calibrate",
+        "capture import",
+        "capture boards",
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_irmirror"))
-            .args([cmd, "--help"])
+            .args(cmd.split(' ').chain(["--help"]))
             .output()
             .unwrap();
         let text = String::from_utf8_lossy(&o.stdout);

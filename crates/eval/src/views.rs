@@ -150,6 +150,71 @@ pub fn stretched(img: &Image<f64>, region: &Image<bool>) -> RgbImage {
     })
 }
 
+/// The depth image's edges drawn over the thermal frame: every depth pixel next to a jump of
+/// more than 3 % in depth (an object's outline, the table's edge) is lifted to 3-D, moved into
+/// the thermal camera by `depth_from_thermal` and marked red (the near side of the jump). With a
+/// right calibration the red outlines sit on the thermal image's own outlines; a wrong
+/// extrinsic or focal length shows as a shift or a scale at a glance.
+pub fn depth_edges_on_thermal(
+    thermal_k: &Image<f64>,
+    depth_m: &Image<f32>,
+    depth_camera: &PinholeCamera,
+    thermal_camera: &PinholeCamera,
+    depth_from_thermal: &Rigid3<f64>,
+) -> RgbImage {
+    let all = Image::filled(thermal_k.width, thermal_k.height, true);
+    let mut img = stretched(thermal_k, &all);
+    let thermal_from_depth = depth_from_thermal.inverse();
+    let (w, h) = (depth_m.width, depth_m.height);
+    let z = |c: u32, r: u32| f64::from(depth_m.data[(r * w + c) as usize]);
+    // A depth pixel covers about this many thermal pixels a side: mark them all, so that the
+    // outline is a line, not dots.
+    let side = (thermal_camera.fx / depth_camera.fx)
+        .round()
+        .clamp(1.0, 8.0) as i64;
+    for r in 0..h {
+        for c in 0..w {
+            let zc = z(c, r);
+            if !zc.is_finite() {
+                continue;
+            }
+            let edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|&(dc, dr)| {
+                    let (cc, rr) = (i64::from(c) + dc, i64::from(r) + dr);
+                    if cc < 0 || rr < 0 || cc >= i64::from(w) || rr >= i64::from(h) {
+                        return false;
+                    }
+                    let zn = z(cc as u32, rr as u32);
+                    // The far side of a jump, or a hole, counts on the near side only.
+                    !zn.is_finite() || zn > zc * 1.03
+                });
+            if !edge {
+                continue;
+            }
+            let p = depth_camera.unproject(f64::from(c) + 0.5, f64::from(r) + 0.5, zc);
+            if let Some((u, v)) = thermal_camera.project(&thermal_from_depth.transform_point(&p)) {
+                for dy in 0..side {
+                    for dx in 0..side {
+                        let (x, y) = (
+                            (u - side as f64 / 2.0).floor() as i64 + dx,
+                            (v - side as f64 / 2.0).floor() as i64 + dy,
+                        );
+                        if x >= 0
+                            && y >= 0
+                            && x < i64::from(img.width())
+                            && y < i64::from(img.height())
+                        {
+                            img.put_pixel(x as u32, y as u32, Rgb([255, 40, 40]));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    img
+}
+
 /// Observed rise, fitted rise and their residual side by side, cropped to the reflection (the
 /// mask's largest connected piece, 3 pixels around) and enlarged
 /// by nearest neighbour to ≈ 240 pixels high. Rises share one grey scale (0 to the observed

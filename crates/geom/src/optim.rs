@@ -8,6 +8,8 @@
 //!   updated on their manifold (`R ← exp(−δ) R`), not by subtraction.
 //! * [`CosineDecay`]: the learning-rate factor `floor + (1 − floor) · ½ (1 + cos πp)` at progress
 //!   `p ∈ [0, 1]`.
+//! * [`levenberg_marquardt`]: small dense nonlinear least squares with a caller-supplied
+//!   Jacobian and retraction (camera calibration's bundle adjustment).
 //!
 //! The candle training loops of the shipped priors (`irmirror-sdf::train`,
 //! `irmirror-body::prior::train`) step their tensors with candle's `AdamW` (weight decay 0: Adam)
@@ -114,9 +116,140 @@ impl CosineDecay {
     }
 }
 
+/// Settings of [`levenberg_marquardt`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LmParams {
+    /// Most iterations (accepted or rejected steps).
+    pub max_iterations: usize,
+    /// Initial damping, relative to the mean diagonal of `JᵀJ`.
+    pub initial_damping: f64,
+    /// Stop when a step lowers the cost by less than this fraction.
+    pub relative_tolerance: f64,
+}
+
+impl Default for LmParams {
+    fn default() -> Self {
+        Self {
+            max_iterations: 100,
+            initial_damping: 1e-3,
+            relative_tolerance: 1e-12,
+        }
+    }
+}
+
+/// What [`levenberg_marquardt`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LmReport {
+    /// ½‖r‖² at the start.
+    pub initial_cost: f64,
+    /// ½‖r‖² at the end.
+    pub final_cost: f64,
+    /// Iterations run.
+    pub iterations: usize,
+}
+
+/// Minimises `½‖r(x)‖²` by Levenberg–Marquardt (Marquardt's diagonal scaling) over a state the
+/// caller owns. `eval(state, r, j)` fills the `m` residuals and, when `j` is given, the
+/// row-major `m × n` Jacobian with respect to the local increment; `retract(state, δ)` returns
+/// the state moved by the increment `δ` (so rotations stay on their manifold). Dense normal
+/// equations: meant for at most a few hundred parameters.
+pub fn levenberg_marquardt<S: Clone>(
+    state: &mut S,
+    n: usize,
+    m: usize,
+    params: LmParams,
+    eval: impl Fn(&S, &mut [f64], Option<&mut [f64]>),
+    retract: impl Fn(&S, &[f64]) -> S,
+) -> LmReport {
+    use nalgebra::{DMatrix, DVector};
+    let (mut r, mut j) = (vec![0.0; m], vec![0.0; m * n]);
+    let cost = |r: &[f64]| 0.5 * r.iter().map(|v| v * v).sum::<f64>();
+    eval(state, &mut r, Some(&mut j));
+    let initial_cost = cost(&r);
+    let mut current = initial_cost;
+    let mut lambda = f64::NAN;
+    let mut trial_r = vec![0.0; m];
+    let mut iterations = 0;
+    while iterations < params.max_iterations {
+        iterations += 1;
+        let jm = DMatrix::from_row_slice(m, n, &j);
+        let jtj = jm.transpose() * &jm;
+        let g = jm.transpose() * DVector::from_column_slice(&r);
+        if lambda.is_nan() {
+            lambda = params.initial_damping * (jtj.trace() / n.max(1) as f64).max(1e-300);
+        }
+        let mut a = jtj.clone();
+        for k in 0..n {
+            a[(k, k)] += lambda * jtj[(k, k)].max(1e-12);
+        }
+        let Some(chol) = a.cholesky() else {
+            lambda *= 10.0;
+            continue;
+        };
+        let delta = -chol.solve(&g);
+        let trial = retract(state, delta.as_slice());
+        eval(&trial, &mut trial_r, None);
+        let c = cost(&trial_r);
+        if c.is_finite() && c < current {
+            let gain = (current - c) / current.max(1e-300);
+            *state = trial;
+            current = c;
+            eval(state, &mut r, Some(&mut j));
+            lambda = (lambda / 3.0).max(1e-15);
+            if gain < params.relative_tolerance {
+                break;
+            }
+        } else {
+            lambda *= 4.0;
+            if lambda > 1e12 {
+                break;
+            }
+        }
+    }
+    LmReport {
+        initial_cost,
+        final_cost: current,
+        iterations,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn levenberg_marquardt_fits_an_exponential_from_far_away() {
+        // y = a · exp(b · t) sampled without noise; start at (1, 0).
+        let (a, b) = (2.5, -1.3);
+        let ts: Vec<f64> = (0..20).map(|i| i as f64 * 0.2).collect();
+        let ys: Vec<f64> = ts.iter().map(|t| a * (b * t).exp()).collect();
+        let mut x = [1.0, 0.0];
+        let rep = levenberg_marquardt(
+            &mut x,
+            2,
+            ts.len(),
+            LmParams::default(),
+            |x, r, j| {
+                for (i, t) in ts.iter().enumerate() {
+                    let e = (x[1] * t).exp();
+                    r[i] = x[0] * e - ys[i];
+                }
+                if let Some(j) = j {
+                    for (i, t) in ts.iter().enumerate() {
+                        let e = (x[1] * t).exp();
+                        j[2 * i] = e;
+                        j[2 * i + 1] = x[0] * t * e;
+                    }
+                }
+            },
+            |x, d| [x[0] + d[0], x[1] + d[1]],
+        );
+        assert!(
+            (x[0] - a).abs() < 1e-8 && (x[1] - b).abs() < 1e-8,
+            "{x:?} {rep:?}"
+        );
+        assert!(rep.final_cost < 1e-16 && rep.initial_cost > 1.0, "{rep:?}");
+    }
 
     #[test]
     fn adam_minimises_a_quadratic_with_group_rates() {

@@ -10,6 +10,7 @@
 //!  ─► capture.toml, depth.png, thermal.png, thermal_background.png, rgb.png, masks/, truth/
 //! ```
 
+pub mod board;
 pub mod people;
 pub mod presets;
 pub mod scene;

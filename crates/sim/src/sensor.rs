@@ -22,6 +22,19 @@ pub fn thermal_radiance(
     depth_from_camera: &Rigid3<f64>,
     supersample: u32,
 ) -> Image<f64> {
+    supersampled(camera, supersample, |u, v| {
+        let ray = depth_from_camera.transform_ray(&camera.ray_at::<f64>(u, v));
+        world.radiance(&ray, BOUNCES)
+    })
+}
+
+/// Per pixel of `camera`, the mean of `value(u, v)` over an `s × s` grid of sub-pixel image
+/// points (pixel centres at +0.5), in parallel.
+pub fn supersampled(
+    camera: &PinholeCamera,
+    supersample: u32,
+    value: impl Fn(f64, f64) -> f64 + Sync,
+) -> Image<f64> {
     let s = supersample.max(1);
     let (w, h) = (camera.width, camera.height);
     let data = (0..w * h)
@@ -33,8 +46,7 @@ pub fn thermal_radiance(
                 for b in 0..s {
                     let u = f64::from(col) + (f64::from(a) + 0.5) / f64::from(s);
                     let v = f64::from(row) + (f64::from(b) + 0.5) / f64::from(s);
-                    let ray = depth_from_camera.transform_ray(&camera.ray_at::<f64>(u, v));
-                    sum += world.radiance(&ray, BOUNCES);
+                    sum += value(u, v);
                 }
             }
             sum / f64::from(s * s)
