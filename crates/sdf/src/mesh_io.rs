@@ -29,6 +29,25 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh, SdfError> {
     if mesh.triangles.is_empty() {
         return Err(bad(path, "the mesh has no triangles"));
     }
+    // Normalisation divides by the extent and sampling by the area: a mesh of one point or of
+    // collinear vertices has neither.
+    let area: f64 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let v = |i: u32| {
+                let p = mesh.vertices[i as usize];
+                nalgebra::Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+            };
+            0.5 * (v(t[1]) - v(t[0])).cross(&(v(t[2]) - v(t[0]))).norm()
+        })
+        .sum();
+    if area.is_nan() || area <= 0.0 {
+        return Err(bad(
+            path,
+            "the mesh has zero surface area (every triangle is degenerate)",
+        ));
+    }
     Ok(mesh)
 }
 

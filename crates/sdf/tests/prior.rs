@@ -285,6 +285,12 @@ fn bad_meshes_are_clear_errors_and_stl_is_welded() {
     )
     .unwrap();
     assert!(read_mesh(&dir.join("nan.obj")).is_err());
+    std::fs::write(dir.join("flat.obj"), "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap();
+    let e = read_mesh(&dir.join("flat.obj")).unwrap_err().to_string();
+    assert!(
+        e.contains("zero surface area") && e.contains("flat.obj"),
+        "{e}"
+    );
     std::fs::write(dir.join("x.stl"), "garbage").unwrap();
     assert!(read_mesh(&dir.join("x.stl")).is_err());
     assert!(read_mesh(&dir.join("missing.ply")).is_err());
