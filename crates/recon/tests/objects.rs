@@ -422,3 +422,37 @@ fn learned_prior_fits_family_shapes() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A mug whose handle shows in 6 depth pixels (tabletop-wide regime, seed 15): the eight yaw
+/// restarts all missed the handle (losses within 0.1 % of each other, the best 157° off); the
+/// restart aimed at the points the cup leaves unexplained finds it.
+#[test]
+fn a_mug_handle_seen_in_a_few_pixels_sets_its_yaw() {
+    use irmirror_sim::presets::{Regime, Shapes, regime_scene};
+    let seed = 15;
+    let sc = regime_scene(model(), Regime::TabletopWide, Shapes::Simple, seed).unwrap();
+    let (dir, truth) = write("handle15", &sc, seed);
+    let cap = Capture::load(&dir).unwrap();
+    let objs = reconstruct_objects(&cap, &Stage1Config::default(), seed).unwrap();
+    let k = objs
+        .objects
+        .iter()
+        .position(|o| o.category == irmirror_geom::Category::Mug)
+        .expect("a mug");
+    let (fit, tr) = (&objs.objects[k].depth_from_object, &truth[k]);
+    // The handle's direction (+X) about the mug's axis.
+    let yaw = (fit.rotation * Vector3::x())
+        .angle(&(tr.rotation * Vector3::x()))
+        .to_degrees();
+    let (t, up, s) = errors(fit, tr);
+    eprintln!(
+        "mug: handle {yaw:.1}°, t {:.1} mm, up {up:.2}°, s {s:.1} %",
+        t * 1e3
+    );
+    assert!(
+        yaw < 5.0 && t < 0.005,
+        "handle {yaw:.1}° off, centre {:.1} mm",
+        t * 1e3
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -82,16 +82,24 @@ impl Shape {
                     half_thickness: 0.5 * wall * r,
                 })
             }
+            Shape::Mug { .. } => Arc::new(self.mug().expect("a mug")),
+            Shape::Car { cabin, height } => Arc::new(Car { cabin, height }),
+        }
+    }
+
+    /// The mug's geometry (None for other shapes): height 2h and radius ρ (with the handle)
+    /// fitted into the unit sphere.
+    pub fn mug(&self) -> Option<Mug> {
+        match *self {
             Shape::Mug { aspect, wall } => {
-                // Fit height 2h and radius ρ (with handle) into the unit sphere.
                 let rho = 0.9 / (1.0f64 + aspect * aspect).sqrt() / 1.2;
-                Arc::new(Mug {
+                Some(Mug {
                     radius: rho,
                     half_height: aspect * rho,
                     wall: wall * rho,
                 })
             }
-            Shape::Car { cabin, height } => Arc::new(Car { cabin, height }),
+            _ => None,
         }
     }
 
@@ -125,12 +133,20 @@ pub struct Mug {
     pub wall: f64,
 }
 
-impl Sdf for Mug {
-    fn distance(&self, p: &Vector3<f64>) -> f64 {
+impl Mug {
+    /// Signed distance to the cup alone (the mug without its handle).
+    pub fn cup_distance(&self, p: &Vector3<f64>) -> f64 {
         let h = self.half_height;
         let outer = capped_cylinder(p, self.radius, -h, h);
         let cavity = capped_cylinder(p, self.radius - self.wall, -h + self.wall, h + 1.0);
-        let shell = outer.max(-cavity);
+        outer.max(-cavity)
+    }
+}
+
+impl Sdf for Mug {
+    fn distance(&self, p: &Vector3<f64>) -> f64 {
+        let h = self.half_height;
+        let shell = self.cup_distance(p);
         // Handle: a torus in the XY plane beside the wall, clipped to outside the wall.
         let c = Vector2::new(self.radius, 0.0);
         let big = 0.45 * h;

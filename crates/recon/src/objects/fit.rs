@@ -180,7 +180,7 @@ pub fn fit_family(
         })
         .collect();
     let restarts = inits.len();
-    let runs: Vec<(State, f64, Vec<f64>)> = inits
+    let mut runs: Vec<(State, f64, Vec<f64>)> = inits
         .into_par_iter()
         .filter_map(|s| problem.run(s))
         .collect();
@@ -194,13 +194,20 @@ pub fn fit_family(
             st.log_scale.exp()
         );
     }
-    let (st, loss, curve) =
-        runs.into_iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .ok_or(ReconError::Diverged {
-                stage: "object fit",
-                runs: restarts,
-            })?;
+    if let Some(extra) = handle_restart(family, &runs, obs)
+        && let Some(run) = problem.run(extra)
+    {
+        runs.push(run);
+    }
+    // The lowest loss: with the handle's restart, the handle side wins it (seed 15 of the
+    // tabletop-wide regime: 156.7° → 0.3°).
+    let pick = (0..runs.len()).min_by(|&a, &b| runs[a].1.total_cmp(&runs[b].1));
+    let (st, loss, curve) = pick
+        .map(|k| runs.swap_remove(k))
+        .ok_or(ReconError::Diverged {
+            stage: "object fit",
+            runs: restarts,
+        })?;
     let shape = family.shape(&st.u);
     let sim = st.sim();
     let placed = PlacedSdf {
@@ -222,6 +229,50 @@ pub fn fit_family(
         points: obs.surface.len(),
         loss_curve: curve,
         learned: None,
+    })
+}
+
+/// A point the cup alone leaves farther than this (object units: ≈ 2 mm on a 6.4 cm mug, four
+/// times the depth noise at 0.6 m) is handle evidence.
+const HANDLE_EVIDENCE: f64 = 0.03;
+/// Fewest such points for the evidence to decide.
+const HANDLE_MIN_POINTS: usize = 3;
+
+/// The points the best restart's cup leaves unexplained (object frame), when it is a mug.
+fn unexplained(family: Family, st: &State, obs: &ObjectObservation) -> Option<Vec<Vector3<f64>>> {
+    let mug = family.shape(&st.u).mug()?;
+    let sim = st.sim();
+    Some(
+        obs.surface
+            .iter()
+            .map(|p| sim.inverse_transform_point(p))
+            .filter(|q| mug.cup_distance(q).abs() > HANDLE_EVIDENCE)
+            .collect(),
+    )
+}
+
+/// One more mug restart, turned about the cup's axis so that its handle points at the points
+/// the best restart's cup leaves unexplained: a 2 mm handle tube 20° off its few depth pixels
+/// has no gradient towards them, so the evenly spread yaw restarts can all miss it.
+fn handle_restart(
+    family: Family,
+    runs: &[(State, f64, Vec<f64>)],
+    obs: &ObjectObservation,
+) -> Option<State> {
+    let (st, _, _) = runs.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let pts = unexplained(family, st, obs)?;
+    if pts.len() < HANDLE_MIN_POINTS {
+        return None;
+    }
+    let mean = pts.iter().fold(Vector3::zeros(), |a, q| a + q) / pts.len() as f64;
+    if mean.x.hypot(mean.z) < 1e-6 {
+        return None;
+    }
+    // R_y(θ) takes +X to (cos θ, 0, −sin θ): the handle (+X) towards the points' azimuth.
+    let theta = (-mean.z).atan2(mean.x);
+    Some(State {
+        rotation: st.rotation * axis_angle_to_matrix(&Vector3::new(0.0, theta, 0.0)),
+        ..*st
     })
 }
 
