@@ -80,6 +80,11 @@ pub enum CaptureCommand {
         /// The rig (from `capture calibrate`, or written by hand in its layout).
         #[arg(long)]
         rig: PathBuf,
+        /// The depth camera's intrinsics for this capture (OpenCV/ROS JSON or YAML), when they
+        /// differ from the rig's: another resolution mode of the same camera
+        /// (`depth_from_thermal` relates the camera frames, so it still holds).
+        #[arg(long)]
+        depth_camera: Option<PathBuf>,
         /// A reflecting object's category (bowl, mug, car, sphere), optionally with a mask PNG
         /// in depth-camera pixels: `mug` or `mug=mask.png`. Repeat for each object.
         #[arg(long, required = true)]
@@ -128,6 +133,7 @@ pub fn run(cmd: CaptureCommand) -> Result<()> {
             depth_units_m,
             rgb,
             rig,
+            depth_camera,
             object,
             out,
         } => import(&ImportArgs {
@@ -137,6 +143,7 @@ pub fn run(cmd: CaptureCommand) -> Result<()> {
             depth_units_m,
             rgb: rgb.as_deref(),
             rig: &rig,
+            depth_camera: depth_camera.as_deref(),
             objects: &object,
             out: &out,
         }),
@@ -350,6 +357,7 @@ struct ImportArgs<'a> {
     depth_units_m: f64,
     rgb: Option<&'a Path>,
     rig: &'a Path,
+    depth_camera: Option<&'a Path>,
     objects: &'a [String],
     out: &'a Path,
 }
@@ -376,12 +384,22 @@ fn import(a: &ImportArgs) -> Result<()> {
     }
     let rig_text = std::fs::read_to_string(a.rig)
         .with_context(|| format!("{}: cannot read", a.rig.display()))?;
-    let rig: RigFile = toml::from_str(&rig_text).with_context(|| {
+    let mut rig: RigFile = toml::from_str(&rig_text).with_context(|| {
         format!(
             "{}: not a rig file (capture calibrate's rig.toml)",
             a.rig.display()
         )
     })?;
+    if let Some(path) = a.depth_camera {
+        let cam = read_intrinsics(path)?;
+        if cam.distortion > 1e-3 {
+            eprintln!(
+                "warning: {} states lens distortion: the depth image must be undistorted (the capture format is pinhole)",
+                path.display()
+            );
+        }
+        rig.depth_camera = cam.camera;
+    }
     let frame = flir::read(a.thermal)?;
     let tc = &rig.thermal_camera.intrinsics;
     if (frame.raw.width, frame.raw.height) != (tc.width, tc.height) {

@@ -374,4 +374,29 @@ fn import_refuses_files_it_cannot_use_and_writes_nothing() {
         stderr(&o)
     );
     assert!(!out.exists());
+    // The same depth image with this capture's own intrinsics (another resolution mode).
+    let own = irmirror_geom::PinholeCamera::from_fov(30, 24, 1.0).unwrap();
+    std::fs::write(
+        work.join("depth30.json"),
+        irmirror_capture::opencv::intrinsics_json(&own),
+    )
+    .unwrap();
+    let o = irmirror(&[
+        "capture",
+        "import",
+        "--thermal",
+        work.join("good.jpg").to_str().unwrap(),
+        "--depth",
+        work.join("depth.png").to_str().unwrap(),
+        "--depth-camera",
+        work.join("depth30.json").to_str().unwrap(),
+        "--rig",
+        work.join("rig.toml").to_str().unwrap(),
+        "--object",
+        "bowl",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(Capture::load(&out).unwrap().depth_camera.width, 30);
 }
