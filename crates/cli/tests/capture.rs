@@ -374,6 +374,62 @@ fn import_refuses_files_it_cannot_use_and_writes_nothing() {
         stderr(&o)
     );
     assert!(!out.exists());
+    // With a depth image of the rig's size: a background of another frame size, and an RGB
+    // image that is not the depth camera's size.
+    let depth32 = work.join("depth32.png");
+    irmirror_capture::write_gray16_png(
+        &Image {
+            width: 32,
+            height: 24,
+            data: vec![900u16; 768],
+        },
+        &depth32,
+    )
+    .unwrap();
+    let small = Image {
+        width: 60,
+        height: 60,
+        data: vec![12500u16; 3600],
+    };
+    std::fs::write(
+        work.join("bg.jpg"),
+        flir::build(&base, &info, &small).unwrap(),
+    )
+    .unwrap();
+    image::RgbImage::new(30, 24)
+        .save(work.join("rgb.png"))
+        .unwrap();
+    let with = |flag: &str, file: &Path| {
+        irmirror(&[
+            "capture",
+            "import",
+            "--thermal",
+            work.join("good.jpg").to_str().unwrap(),
+            "--depth",
+            depth32.to_str().unwrap(),
+            "--rig",
+            work.join("rig.toml").to_str().unwrap(),
+            "--object",
+            "bowl",
+            "--out",
+            out.to_str().unwrap(),
+            flag,
+            file.to_str().unwrap(),
+        ])
+    };
+    let o = with("--background", &work.join("bg.jpg"));
+    assert!(
+        stderr(&o).contains("bg.jpg") && stderr(&o).contains("differ"),
+        "{}",
+        stderr(&o)
+    );
+    let o = with("--rgb", &work.join("rgb.png"));
+    assert!(
+        stderr(&o).contains("rgb.png") && stderr(&o).contains("32×24"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists());
     // The same depth image with this capture's own intrinsics (another resolution mode).
     let own = irmirror_geom::PinholeCamera::from_fov(30, 24, 1.0).unwrap();
     std::fs::write(

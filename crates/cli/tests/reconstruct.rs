@@ -36,6 +36,7 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         "debug/object_pixels.png",
         "debug/mask_raw.png",
         "debug/edges.png",
+        "debug/depth_edges_on_thermal.png",
     ] {
         assert!(out.join(f).exists(), "missing {f}");
     }
