@@ -151,6 +151,7 @@ fn a_short_training_run_lowers_the_loss() {
         lr: 1e-3,
         kl_weight: 5e-3,
         seed: 7,
+        ..TrainConfig::default()
     };
     let mut losses = Vec::new();
     let (_, report) = train(model(), &cfg, |_, l| losses.push(l)).unwrap();

@@ -29,7 +29,7 @@ impl<T: Copy> Image<T> {
         self.data[(row * self.width + col) as usize]
     }
     /// Applies `f` to every pixel.
-    pub fn map<U>(&self, f: impl Fn(T) -> U) -> Image<U> {
+    pub fn map<U>(&self, mut f: impl FnMut(T) -> U) -> Image<U> {
         Image {
             width: self.width,
             height: self.height,

@@ -196,7 +196,16 @@ impl Capture {
         let to_kelvin = |path: &Path| -> Result<Image<f64>, CaptureError> {
             let img = match file.thermal.units {
                 ThermalUnits::CountsLinear { gain, offset } => {
-                    read_gray16_png(path)?.map(|c| temperature_of((f64::from(c) - offset) / gain))
+                    // One inversion per distinct count (a frame has a few thousand): each
+                    // costs a band integral, which per pixel was seconds on a 640×512 frame.
+                    let mut memo = vec![f64::NAN; usize::from(u16::MAX) + 1];
+                    read_gray16_png(path)?.map(|c| {
+                        let m = &mut memo[usize::from(c)];
+                        if m.is_nan() {
+                            *m = temperature_of((f64::from(c) - offset) / gain);
+                        }
+                        *m
+                    })
                 }
                 // Counts at or below the offset give NaN, reported below as non-finite.
                 ThermalUnits::CountsPlanck { r, b, f, o } => {

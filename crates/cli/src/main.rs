@@ -156,6 +156,10 @@ enum Command {
         /// Batch size.
         #[arg(long, default_value_t = 256)]
         batch: usize,
+        /// Joint noise added to the activity templates, degrees (σ per rotation-vector
+        /// component): how far real poses stray from the archetypes.
+        #[arg(long, default_value_t = irmirror_body::prior::generator::JOINT_NOISE_DEG)]
+        joint_noise_deg: f64,
     },
     /// The Table-1 benchmark: simulate captures, reconstruct with and without each step, score.
     ///
@@ -405,10 +409,11 @@ fn main() -> std::process::ExitCode {
             steps,
             poses,
             batch,
+            joint_noise_deg,
         } => {
-            if steps == 0 || poses < 100 || batch == 0 {
+            if steps == 0 || poses < 100 || batch == 0 || !(0.0..=45.0).contains(&joint_noise_deg) {
                 Err(anyhow::anyhow!(
-                    "--steps and --batch must be positive and --poses at least 100"
+                    "--steps and --batch must be positive, --poses at least 100 and --joint-noise-deg within 0–45"
                 ))
             } else {
                 prior_cmd::run(
@@ -418,6 +423,7 @@ fn main() -> std::process::ExitCode {
                         steps,
                         batch,
                         seed,
+                        joint_noise_deg,
                         ..Default::default()
                     },
                     progress,

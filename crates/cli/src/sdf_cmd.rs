@@ -68,6 +68,9 @@ pub fn run(o: Options, progress: bool) -> Result<()> {
                     f.display()
                 );
             }
+            if let Some(w) = mesh_io::size_warning(&m, category.typical_size_m()) {
+                tracing::warn!("{}: {w}", f.display());
+            }
             mesh_io::normalise(&mut m);
             user.push(m);
         }

@@ -55,6 +55,18 @@ impl Category {
     pub fn has_learned_prior(self) -> bool {
         Self::LEARNED.contains(&self)
     }
+
+    /// A typical largest dimension, metres (soup and cereal bowls 12–25 cm across; mugs 8–12
+    /// cm tall, 11–13 cm with the handle; cars [`CAR_LENGTH_M`]; balls 7–25 cm): for telling a
+    /// file in millimetres or inches from one in metres.
+    pub fn typical_size_m(self) -> f64 {
+        match self {
+            Category::Bowl => 0.18,
+            Category::Mug => 0.12,
+            Category::Car => CAR_LENGTH_M,
+            Category::Sphere => 0.15,
+        }
+    }
 }
 
 impl std::fmt::Display for Category {

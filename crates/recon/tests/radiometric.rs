@@ -226,3 +226,46 @@ fn thermal_stratified_batch_draws_whole_pixels() {
     assert_eq!(rise.rise_k.len(), weight.len());
     assert!(rise.entries.iter().all(|e| (e.0 as usize) < sel.rays.len()));
 }
+
+/// The mask's search batch on footprint rays (4 per pixel) takes one ray per pixel: the
+/// batch's pixels are distinct, each stratum's weights add up to its pixels, and `n` rays are
+/// drawn as without a footprint.
+#[test]
+fn mask_stratified_batch_on_a_footprint_takes_one_ray_per_pixel() {
+    let (sc, sim, _) = car_capture(1);
+    let rays = true_object_footprint_rays(&sc, &sim);
+    assert!(rays.footprint > 1);
+    let problem = problem_for(
+        &sim,
+        &rays,
+        &sim.reflection_mask,
+        nalgebra::Vector3::z(),
+        None,
+    );
+    let sample = problem.stratified_batch(1200, 3, false);
+    let mut px = sample.rays.pixel.clone();
+    px.sort_unstable();
+    px.dedup();
+    assert_eq!(px.len(), sample.rays.len(), "one ray per pixel");
+    assert_eq!(sample.rays.len(), 1200);
+    let mut all_px = rays.pixel.clone();
+    all_px.dedup();
+    let mask_px = all_px
+        .iter()
+        .filter(|&&p| sim.reflection_mask.data[p as usize])
+        .count() as f64;
+    let pos: f64 = sample
+        .target
+        .iter()
+        .zip(&sample.weight)
+        .filter(|(t, _)| **t > 0.5)
+        .map(|(_, w)| w)
+        .sum();
+    let all: f64 = sample.weight.iter().sum();
+    assert!((pos - mask_px).abs() < 1e-6 * mask_px, "{pos} vs {mask_px}");
+    assert!(
+        (all - all_px.len() as f64).abs() < 1e-6 * all,
+        "{all} vs {}",
+        all_px.len()
+    );
+}

@@ -160,6 +160,25 @@ pub fn normalise(mesh: &mut TriMesh) {
     mesh.map_vertices(|v| [0, 1, 2].map(|k| ((f64::from(v[k]) - c[k]) * s) as f32));
 }
 
+/// The mesh's largest bounding-box dimension (in its file's units) against `typical_m`: a
+/// warning when it is 10× larger or smaller (a file in millimetres, centimetres or inches), or
+/// `None`. Training normalises every mesh, so its size never enters the prior; the warning
+/// says so.
+pub fn size_warning(mesh: &TriMesh, typical_m: f64) -> Option<String> {
+    let (lo, hi) = mesh.bounds()?;
+    let extent = (0..3)
+        .map(|k| f64::from(hi[k]) - f64::from(lo[k]))
+        .fold(0.0, f64::max);
+    let ratio = extent / typical_m;
+    (!(0.1..=10.0).contains(&ratio)).then(|| {
+        format!(
+            "{extent:.4} units across, {ratio:.3}× a typical one of {typical_m} m: not in metres? \
+             Used as it is: training scales every mesh to the prior's unit sphere, so only its \
+             shape enters the prior"
+        )
+    })
+}
+
 /// Edges not shared by exactly two triangles (0 for a closed manifold mesh).
 pub fn open_edges(mesh: &TriMesh) -> usize {
     let mut count: HashMap<(u32, u32), u32> = HashMap::new();

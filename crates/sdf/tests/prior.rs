@@ -1,7 +1,7 @@
 //! Object priors: generators, samples, the network's gradients, training, inference, files.
 
 use irmirror_sdf::infer::{InferConfig, from_samples, from_surface};
-use irmirror_sdf::mesh_io::{normalise, open_edges, read_mesh};
+use irmirror_sdf::mesh_io::{normalise, open_edges, read_mesh, size_warning};
 use irmirror_sdf::train::{TrainSdfConfig, procedural, sample_meshes, train};
 use irmirror_sdf::{Category, MeshSdf, SdfError, SdfNet};
 use nalgebra::Vector3;
@@ -297,6 +297,18 @@ fn bad_meshes_are_clear_errors_and_stl_is_welded() {
     assert!(read_mesh(&dir.join("a.xyz")).is_err());
     // A cube as ASCII and binary STL: welded into a closed mesh.
     let cube = irmirror_geom::mesh::unit_cube();
+    // Size: a 1 m cube is 5.6× a typical bowl (within 10×: no warning) and a fifth of a car;
+    // the same cube in millimetres is 5,600× a bowl, a 1 cm one a 450th of a car.
+    assert_eq!(size_warning(&cube, Category::Bowl.typical_size_m()), None);
+    assert_eq!(size_warning(&cube, Category::Car.typical_size_m()), None);
+    let scaled = |k: f32| {
+        let mut m = cube.clone();
+        m.map_vertices(|v| v.map(|x| x * k));
+        m
+    };
+    let w = size_warning(&scaled(1000.0), Category::Bowl.typical_size_m()).expect("a warning");
+    assert!(w.contains("not in metres") && w.contains("0.18 m"), "{w}");
+    assert!(size_warning(&scaled(0.01), Category::Car.typical_size_m()).is_some());
     let mut ascii = String::from("solid cube\n");
     let mut bin = vec![0u8; 80];
     bin.extend((cube.triangles.len() as u32).to_le_bytes());

@@ -26,6 +26,9 @@ use crate::BodyModel;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
+/// The joint noise of [`PoseGenerator::sample`], degrees (σ per rotation-vector component).
+pub const JOINT_NOISE_DEG: f64 = 5.0;
+
 /// The template names.
 pub const TEMPLATES: [&str; 17] = [
     "stand",
@@ -221,8 +224,18 @@ impl PoseGenerator {
     }
 
     /// A random pose: a random template, mirrored left/right with probability ½, plus joint
-    /// noise, clamped to the limits. Returns the template name too.
+    /// noise (σ [`JOINT_NOISE_DEG`]), clamped to the limits. Returns the template name too.
     pub fn sample(&self, rng: &mut impl Rng) -> (&'static str, Vec<[f64; 3]>) {
+        self.sample_with_noise(rng, JOINT_NOISE_DEG)
+    }
+
+    /// [`Self::sample`] with Gaussian joint noise of σ `noise_deg` per rotation-vector
+    /// component (0: the templates' own spread only).
+    pub fn sample_with_noise(
+        &self,
+        rng: &mut impl Rng,
+        noise_deg: f64,
+    ) -> (&'static str, Vec<[f64; 3]>) {
         let name = TEMPLATES[rng.random_range(0..TEMPLATES.len())];
         let mut r = self.template(name, rng).expect("known template");
         if rng.random_bool(0.5) {
@@ -234,7 +247,7 @@ impl PoseGenerator {
                 .collect();
             r = m;
         }
-        let noise = Normal::new(0.0, 5f64.to_radians()).expect("σ > 0");
+        let noise = Normal::new(0.0, noise_deg.max(0.0).to_radians()).expect("σ ≥ 0");
         for w in r.iter_mut().skip(1) {
             for x in w.iter_mut() {
                 *x += noise.sample(rng);

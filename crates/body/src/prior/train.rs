@@ -30,6 +30,8 @@ pub struct TrainConfig {
     pub kl_weight: f64,
     /// Seed.
     pub seed: u64,
+    /// Joint noise of the procedural pose set, degrees (σ per rotation-vector component).
+    pub joint_noise_deg: f64,
 }
 
 impl Default for TrainConfig {
@@ -42,6 +44,7 @@ impl Default for TrainConfig {
             lr: 1e-3,
             kl_weight: 5e-3,
             seed: 0,
+            joint_noise_deg: super::generator::JOINT_NOISE_DEG,
         }
     }
 }
@@ -92,11 +95,19 @@ pub fn train(
     let poses_gen = PoseGenerator::new(model);
     let mut data_rng = irmirror_geom::rng::seeded(cfg.seed, 1);
     let poses: Vec<Vec<[f64; 3]>> = (0..cfg.poses)
-        .map(|_| poses_gen.sample(&mut data_rng).1)
+        .map(|_| {
+            poses_gen
+                .sample_with_noise(&mut data_rng, cfg.joint_noise_deg)
+                .1
+        })
         .collect();
     let mut hold_rng = irmirror_geom::rng::seeded(cfg.seed, 2);
     let held: Vec<Vec<[f64; 3]>> = (0..cfg.held_out)
-        .map(|_| poses_gen.sample(&mut hold_rng).1)
+        .map(|_| {
+            poses_gen
+                .sample_with_noise(&mut hold_rng, cfg.joint_noise_deg)
+                .1
+        })
         .collect();
     let dev = candle_core::Device::Cpu;
     let x_all = Tensor::from_vec(features(&poses), (cfg.poses, 6 * super::JOINTS), &dev)?

@@ -85,6 +85,16 @@ pub struct Diagnosis {
     /// Root error after that refinement, m.
     #[serde(default)]
     pub truth_start_root_error_m: Option<f64>,
+    /// Our model *at* the truth, before any step (true root position, rotation and height
+    /// slider, the pose prior's encoding of the true pose, mean-adult proportions): its data
+    /// term. What the pose prior and the mean adult can state of this person.
+    #[serde(default)]
+    pub model_truth_loss: Option<f64>,
+    /// The same state's mean per-vertex error against the true body, m: the floor the pose
+    /// prior (and the mean adult's proportions) put under any fit's per-vertex error, the root
+    /// being exact.
+    #[serde(default)]
+    pub model_truth_vertex_error_m: Option<f64>,
     /// The true body turned 180° about the up axis through its root, scored by the data term:
     /// not above `truth_loss` means the capture cannot tell the truth from its front/back flip.
     #[serde(default)]
@@ -194,6 +204,9 @@ pub(super) fn diagnose(
     let (truth_start_loss, truth_start_root_error_m) =
         refine_from_truth(p, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
+    let at_truth = posed_body(model, prior, &model_truth(p, priors)?)?;
+    let model_truth_loss = Some(problem.mesh_data_loss(&at_truth.vertices, &hcfg).0);
+    let model_truth_vertex_error_m = vertex_error(&at_truth.vertices, &p.sim.body.mesh.vertices);
     let class = Diagnosis::classify(
         truth_loss,
         hypothesis_losses[0],
@@ -213,6 +226,8 @@ pub(super) fn diagnose(
         right_facing_vertex_error_m,
         truth_start_loss,
         truth_start_root_error_m,
+        model_truth_loss,
+        model_truth_vertex_error_m,
         truth_flip_loss,
         truth_mask_losses,
         class,
@@ -237,20 +252,26 @@ fn refine_from_truth(
         &hcfg,
         rad.as_ref(),
     );
-    let person = &p.scene.person;
-    let truth = HumanState {
-        translation: p.sim.body.joints[0],
-        rotation: p.sim.body.depth_from_anny.rotation
-            * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(person.rotvec_rad[0])),
-        height: person.phenotype.height,
-        latent: priors.prior.encode(&person.rotvec_rad)?,
-    };
+    let truth = model_truth(p, priors)?;
     let edge = edge_distance(&rec.pre.mask);
     let Some((end, _)) = problem.run(&truth, &hcfg, Draw::Edge(&edge), seed)? else {
         return Ok(None);
     };
     let data = problem.full_eval(&end, &hcfg)?.data;
     Ok(Some((data, (end.translation - truth.translation).norm())))
+}
+
+/// The truth as stage 2's model states it: true root position and rotation, the true height
+/// slider, the pose prior's encoding of the true pose (mean-adult proportions otherwise).
+fn model_truth(p: &Prepared, priors: BodyPriors<'_>) -> Result<HumanState, EvalError> {
+    let person = &p.scene.person;
+    Ok(HumanState {
+        translation: p.sim.body.joints[0],
+        rotation: p.sim.body.depth_from_anny.rotation
+            * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(person.rotvec_rad[0])),
+        height: person.phenotype.height,
+        latent: priors.prior.encode(&person.rotvec_rad)?,
+    })
 }
 
 /// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every

@@ -288,6 +288,8 @@ mod tests {
             right_facing_vertex_error_m: None,
             truth_start_loss: Some(0.25),
             truth_start_root_error_m: Some(0.05),
+            model_truth_loss: Some(0.5),
+            model_truth_vertex_error_m: Some(0.15),
             truth_flip_loss: Some(0.35),
             truth_mask_losses: Some([0.2, 0.2]),
             class,

@@ -181,7 +181,7 @@ pub fn diagnosis_table(r: &Report) -> String {
 /// the mean per-vertex error of the best hypothesis facing the right way and of the best by loss.
 pub fn hypotheses_table(r: &Report) -> String {
     let mut s = String::from(
-        "\n| cell | n | root error, median (m) | root error / distance, median (%) | true facing among the hypotheses | per-vertex error, best right-facing hypothesis, median (m) | per-vertex error, best by loss, median (m) | 2-D keypoints, median | stage 2 time, median (s) |\n|---|---|---|---|---|---|---|---|---|\n",
+        "\n| cell | n | root error, median (m) | root error / distance, median (%) | true facing among the hypotheses | per-vertex error, best right-facing hypothesis, median (m) | per-vertex error, best by loss, median (m) | 2-D keypoints, median | stage 2 time, median (s) | our model at the truth: per-vertex error / data term, median (m / –) |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in Cell::ALL {
         let caps = of_cell(r, c);
@@ -212,8 +212,13 @@ pub fn hypotheses_table(r: &Report) -> String {
             .filter_map(|d| d.right_facing_vertex_error_m)
             .collect();
         let times: Vec<f64> = evals.iter().map(|(_, t)| *t).collect();
+        let floor: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.model_truth_vertex_error_m)
+            .collect();
+        let floor_loss: Vec<f64> = ds.iter().filter_map(|d| d.model_truth_loss).collect();
         s.push_str(&format!(
-            "| {c} | {} | {} | {} | {found} of {} | {} (n = {}) | {} | {} | {} |\n",
+            "| {c} | {} | {} | {} | {found} of {} | {} (n = {}) | {} | {} | {} | {} / {} |\n",
             caps.len(),
             median(&pick(|e| Some(e.root_error_m))),
             median(&pick(|e| Some(
@@ -225,6 +230,8 @@ pub fn hypotheses_table(r: &Report) -> String {
             median(&pick(|e| e.vertex_error_m)),
             median(&pick(|e| e.keypoints_2d_normalised)),
             median(&times),
+            median(&floor),
+            median(&floor_loss),
         ));
     }
     s

@@ -120,7 +120,8 @@ impl HumanProblem<'_> {
     /// inverse sampling rate. A uniform draw would see a few dozen mask rays on a car door
     /// (a 2,500-pixel reflection among 150,000 object pixels), too few to rank candidates.
     /// With `thermal`, the radiometric term's pixels are drawn instead (about `n` of its rays
-    /// per pixel's worth), with the rays their predictions weigh.
+    /// per pixel's worth), with the rays their predictions weigh; without it and with a
+    /// pixel footprint of several rays, the first ray of each pixel.
     pub fn stratified_batch(&self, n: usize, seed: u64, thermal: bool) -> Stratified {
         let target_all = self.targets();
         let rad = self.radiometry.filter(|_| thermal);
@@ -129,8 +130,22 @@ impl HumanProblem<'_> {
             Some(r) => self.mask.data[r.pixel[u] as usize],
             None => target_all[u] > 0.5,
         };
-        let n = (n * units).div_ceil(self.rays.len().max(1));
-        let (pos, neg): (Vec<usize>, Vec<usize>) = (0..units).partition(|&u| in_mask(u));
+        // The mask's search sees one ray per pixel: a pixel's footprint rays lie within a
+        // pixel of each other, so its other rays add cost (4× the mask rays near the body,
+        // where the occupancy is dear) and no ranking information.
+        let pool: Vec<usize> = match rad {
+            None if self.rays.footprint > 1 => (0..units)
+                .filter(|&u| u == 0 || self.rays.pixel[u] != self.rays.pixel[u - 1])
+                .collect(),
+            _ => (0..units).collect(),
+        };
+        // `n` rays of one per pixel, or as many pixels' worth of the radiometric term's.
+        let n = if rad.is_some() {
+            (n * units).div_ceil(self.rays.len().max(1))
+        } else {
+            n
+        };
+        let (pos, neg): (Vec<usize>, Vec<usize>) = pool.into_iter().partition(|&u| in_mask(u));
         let mut rng = irmirror_geom::rng::seeded(seed, 41);
         let n_pos = pos.len().min(n.div_ceil(2));
         let n_neg = neg.len().min(n.saturating_sub(n_pos).max(1));
