@@ -399,31 +399,36 @@ fn import_refuses_files_it_cannot_use_and_writes_nothing() {
     image::RgbImage::new(30, 24)
         .save(work.join("rgb.png"))
         .unwrap();
-    let with = |flag: &str, file: &Path| {
-        irmirror(&[
+    // `capture import` of good.jpg into `out` with the given depth image and further flags.
+    let (good, rig) = (work.join("good.jpg"), work.join("rig.toml"));
+    let import = |depth: &Path, extra: &[&str]| {
+        let mut args = vec![
             "capture",
             "import",
             "--thermal",
-            work.join("good.jpg").to_str().unwrap(),
+            good.to_str().unwrap(),
             "--depth",
-            depth32.to_str().unwrap(),
+            depth.to_str().unwrap(),
             "--rig",
-            work.join("rig.toml").to_str().unwrap(),
+            rig.to_str().unwrap(),
             "--object",
             "bowl",
             "--out",
             out.to_str().unwrap(),
-            flag,
-            file.to_str().unwrap(),
-        ])
+        ];
+        args.extend(extra);
+        irmirror(&args)
     };
-    let o = with("--background", &work.join("bg.jpg"));
+    let o = import(
+        &depth32,
+        &["--background", work.join("bg.jpg").to_str().unwrap()],
+    );
     assert!(
         stderr(&o).contains("bg.jpg") && stderr(&o).contains("differ"),
         "{}",
         stderr(&o)
     );
-    let o = with("--rgb", &work.join("rgb.png"));
+    let o = import(&depth32, &["--rgb", work.join("rgb.png").to_str().unwrap()]);
     assert!(
         stderr(&o).contains("rgb.png") && stderr(&o).contains("32×24"),
         "{}",
@@ -437,22 +442,13 @@ fn import_refuses_files_it_cannot_use_and_writes_nothing() {
         irmirror_capture::opencv::intrinsics_json(&own),
     )
     .unwrap();
-    let o = irmirror(&[
-        "capture",
-        "import",
-        "--thermal",
-        work.join("good.jpg").to_str().unwrap(),
-        "--depth",
-        work.join("depth.png").to_str().unwrap(),
-        "--depth-camera",
-        work.join("depth30.json").to_str().unwrap(),
-        "--rig",
-        work.join("rig.toml").to_str().unwrap(),
-        "--object",
-        "bowl",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = import(
+        &work.join("depth.png"),
+        &[
+            "--depth-camera",
+            work.join("depth30.json").to_str().unwrap(),
+        ],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(Capture::load(&out).unwrap().depth_camera.width, 30);
 }

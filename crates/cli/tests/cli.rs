@@ -159,6 +159,16 @@ fn bad_inputs_fail_cleanly() {
             ],
             "--rank",
         ),
+        (
+            vec![
+                "train-pose-prior".into(),
+                "--out".into(),
+                tmp("noisy.safetensors").display().to_string(),
+                "--joint-noise-deg".into(),
+                "90".into(),
+            ],
+            "--joint-noise-deg within 0–45",
+        ),
     ];
     for (args, expect) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -168,6 +178,7 @@ fn bad_inputs_fail_cleanly() {
         assert!(e.contains("error") && e.contains(expect), "{args:?}: {e}");
         assert!(!e.contains("panicked"), "{e}");
     }
+    assert!(!tmp("noisy.safetensors").exists());
     // A corrupt asset.
     let bad = tmp("bad.safetensors");
     std::fs::write(&bad, b"\x08\x00\x00\x00\x00\x00\x00\x00{}garbage").unwrap();

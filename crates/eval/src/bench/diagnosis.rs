@@ -201,10 +201,11 @@ pub(super) fn diagnose(
         .zip(&hypothesis_facing_errors_deg)
         .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
         .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
+    let truth_state = model_truth(p, priors)?;
     let (truth_start_loss, truth_start_root_error_m) =
-        refine_from_truth(p, priors, rec, (seed, cfg))?
+        refine_from_truth(&truth_state, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
-    let at_truth = posed_body(model, prior, &model_truth(p, priors)?)?;
+    let at_truth = posed_body(model, prior, &truth_state)?;
     let model_truth_loss = Some(problem.mesh_data_loss(&at_truth.vertices, &hcfg).0);
     let model_truth_vertex_error_m = vertex_error(&at_truth.vertices, &p.sim.body.mesh.vertices);
     let class = Diagnosis::classify(
@@ -237,7 +238,7 @@ pub(super) fn diagnose(
 /// Stage 2's refinement started at the truth (as our model can state it): its data term and
 /// root error; `None` when it diverged.
 fn refine_from_truth(
-    p: &Prepared,
+    truth: &HumanState,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
     (seed, cfg): (u64, &ReconConfig),
@@ -252,9 +253,8 @@ fn refine_from_truth(
         &hcfg,
         rad.as_ref(),
     );
-    let truth = model_truth(p, priors)?;
     let edge = edge_distance(&rec.pre.mask);
-    let Some((end, _)) = problem.run(&truth, &hcfg, Draw::Edge(&edge), seed)? else {
+    let Some((end, _)) = problem.run(truth, &hcfg, Draw::Edge(&edge), seed)? else {
         return Ok(None);
     };
     let data = problem.full_eval(&end, &hcfg)?.data;
