@@ -9,9 +9,10 @@
 //! by the smallest
 //! rotation that points it along its motion-capture segment (twist about a bone is not
 //! observable from joint positions and stays the parent's). Unmapped bones (`pelvis.L/R`,
-//! `shoulder01`, `wrist`, `head`) follow their parents. The shipped set
-//! (`assets/poses/mocap_bvhtools.safetensors`, see its README) is what
-//! `irmirror body retarget-bvh` makes from the `bvhTools` package's files.
+//! `shoulder01`, `wrist`, `head`) follow their parents. DeepMimic motion clips are read as such
+//! a skeleton too ([`Bvh::from_deepmimic`]). The shipped sets (`assets/poses/`, see its README)
+//! are what `irmirror body retarget-bvh` makes from the `bvhTools` package's files (the
+//! benchmark's persons) and from pybullet's DeepMimic clips (the pose prior's real poses).
 
 use crate::{BodyError, BodyModel, ShapedBody};
 use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle};
@@ -39,6 +40,9 @@ pub struct Bvh {
     channels: Vec<Vec<Channel>>,
     /// Frames: every joint's channel values, in file order.
     pub frames: Vec<Vec<f64>>,
+    /// The vertical when the format states it (DeepMimic: +Y); `None`: [`Retarget`] takes the
+    /// coordinate axis nearest the mean hips → neck.
+    pub up: Option<Vector3<f64>>,
 }
 
 fn bad(origin: &str, reason: impl Into<String>) -> BodyError {
@@ -55,6 +59,7 @@ impl Bvh {
             offsets: vec![],
             channels: vec![],
             frames: vec![],
+            up: None,
         };
         if tok.next() != Some("HIERARCHY") {
             return Err(bad(origin, "not a BVH file (no HIERARCHY)"));
@@ -155,6 +160,105 @@ impl Bvh {
         }
         out.frames = values.chunks(per_frame).map(<[f64]>::to_vec).collect();
         Ok(out)
+    }
+
+    /// Reads a DeepMimic motion (`{"Frames": [[…44 values…], …]}`: duration, root position,
+    /// then per joint a quaternion `w x y z` or, for knees and elbows, one angle about the local
+    /// Z axis; the `humanoid3d` character, Y up, X forward, +Z to its right) as a skeleton with
+    /// Mixamo-like names, so [`Retarget`] maps it like any BVH. The character's offsets are from
+    /// its URDF (`pybullet_data/humanoid/humanoid.urdf`, which is 4× scale); only segment
+    /// *directions* matter to the retargeting. It has no clavicles, spine segments or wrists:
+    /// the clavicles point straight across the chest, the whole spine above the waist joint
+    /// follows the chest, and the hands the forearms.
+    pub fn from_deepmimic(text: &str, origin: &str) -> Result<Self, BodyError> {
+        #[derive(serde::Deserialize)]
+        struct Motion {
+            #[serde(rename = "Frames")]
+            frames: Vec<Vec<f64>>,
+        }
+        /// Where a joint's rotation comes from in a DeepMimic frame.
+        enum Src {
+            Root,
+            Quat(usize),
+            Hinge(usize),
+            Fixed,
+        }
+        use Src::{Fixed, Hinge, Quat, Root};
+        #[rustfmt::skip]
+        let joints: [(&str, i32, [f64; 3], Src); 22] = [
+            ("Hips", -1, [0.0, 0.0, 0.0], Root),
+            ("Spine", 0, [0.0, 0.236151, 0.0], Quat(8)), // the chest joint (waist)
+            ("Spine1", 1, [0.0, 0.075, 0.0], Fixed),
+            ("Spine2", 2, [0.0, 0.075, 0.0], Fixed),
+            ("Neck", 3, [0.0, 0.073894, 0.0], Quat(12)),
+            ("Head", 4, [0.0, 0.2, 0.0], Fixed),
+            ("RightShoulder", 3, [-0.02405, 0.0935, 0.0], Fixed),
+            ("RightArm", 6, [0.0, 0.0, 0.18311], Quat(25)),
+            ("RightForeArm", 7, [0.0, -0.274788, 0.0], Hinge(29)),
+            ("RightHand", 8, [0.0, -0.258947, 0.0], Fixed),
+            ("LeftShoulder", 3, [-0.02405, 0.0935, 0.0], Fixed),
+            ("LeftArm", 10, [0.0, 0.0, -0.18311], Quat(39)),
+            ("LeftForeArm", 11, [0.0, -0.274788, 0.0], Hinge(43)),
+            ("LeftHand", 12, [0.0, -0.258947, 0.0], Fixed),
+            ("RightUpLeg", 0, [0.0, 0.0, 0.084887], Quat(16)),
+            ("RightLeg", 14, [0.0, -0.421546, 0.0], Hinge(20)),
+            ("RightFoot", 15, [0.0, -0.40987, 0.0], Quat(21)),
+            ("RightToe", 16, [0.13, -0.045, 0.0], Fixed),
+            ("LeftUpLeg", 0, [0.0, 0.0, -0.084887], Quat(30)),
+            ("LeftLeg", 18, [0.0, -0.421546, 0.0], Hinge(34)),
+            ("LeftFoot", 19, [0.0, -0.40987, 0.0], Quat(35)),
+            ("LeftToe", 20, [0.13, -0.045, 0.0], Fixed),
+        ];
+        const WIDTH: usize = 44;
+        let motion: Motion = serde_json::from_str(text)
+            .map_err(|e| bad(origin, format!("not a DeepMimic motion: {e}")))?;
+        if motion.frames.is_empty() {
+            return Err(bad(origin, "no frames"));
+        }
+        // Z-Y-X Euler channels compose to R = Rz Ry Rx, which `euler_angles` inverts.
+        let zyx = |q: &[f64]| -> Option<[f64; 3]> {
+            let q = nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]);
+            let q = nalgebra::UnitQuaternion::try_new(q, 1e-6)?;
+            let (roll, pitch, yaw) = q.euler_angles();
+            Some([yaw.to_degrees(), pitch.to_degrees(), roll.to_degrees()])
+        };
+        let mut frames = Vec::with_capacity(motion.frames.len());
+        for (f, v) in motion.frames.iter().enumerate() {
+            let broken = || bad(origin, format!("frame {f}: expected {WIDTH} finite values"));
+            if v.len() != WIDTH || v.iter().any(|x| !x.is_finite()) {
+                return Err(broken());
+            }
+            let mut out = Vec::with_capacity(3 + 3 * joints.len());
+            for (_, _, _, src) in &joints {
+                match *src {
+                    Root => {
+                        out.extend_from_slice(&v[1..4]);
+                        out.extend(zyx(&v[4..8]).ok_or_else(broken)?);
+                    }
+                    Quat(k) => out.extend(zyx(&v[k..k + 4]).ok_or_else(broken)?),
+                    Hinge(k) => out.push(v[k].to_degrees()),
+                    Fixed => {}
+                }
+            }
+            frames.push(out);
+        }
+        use Channel::{PosX, PosY, PosZ, RotX, RotY, RotZ};
+        Ok(Bvh {
+            names: joints.iter().map(|j| j.0.to_string()).collect(),
+            parents: joints.iter().map(|j| j.1).collect(),
+            offsets: joints.iter().map(|j| Vector3::from(j.2)).collect(),
+            channels: joints
+                .iter()
+                .map(|j| match j.3 {
+                    Root => vec![PosX, PosY, PosZ, RotZ, RotY, RotX],
+                    Quat(_) => vec![RotZ, RotY, RotX],
+                    Hinge(_) => vec![RotZ],
+                    Fixed => vec![],
+                })
+                .collect(),
+            frames,
+            up: Some(Vector3::y()),
+        })
     }
 
     /// Index of a joint by name.
@@ -354,20 +458,22 @@ impl Retarget {
                 .unwrap_or((0, 0))
         };
         let (pelvis, neck) = (seg("spine05").0, seg("spine01").1);
-        let mean_up = (0..bvh.frames.len())
-            .step_by(10)
-            .map(|f| {
-                let p = bvh.positions(f);
-                (p[neck] - p[pelvis])
-                    .try_normalize(1e-9)
-                    .unwrap_or_default()
-            })
-            .fold(Vector3::zeros(), |a, d| a + d);
-        let up = [Vector3::x(), Vector3::y(), Vector3::z()]
-            .into_iter()
-            .flat_map(|a| [a, -a])
-            .max_by(|a, b| a.dot(&mean_up).total_cmp(&b.dot(&mean_up)))
-            .expect("six axes");
+        let up = bvh.up.unwrap_or_else(|| {
+            let mean_up = (0..bvh.frames.len())
+                .step_by(10)
+                .map(|f| {
+                    let p = bvh.positions(f);
+                    (p[neck] - p[pelvis])
+                        .try_normalize(1e-9)
+                        .unwrap_or_default()
+                })
+                .fold(Vector3::zeros(), |a, d| a + d);
+            [Vector3::x(), Vector3::y(), Vector3::z()]
+                .into_iter()
+                .flat_map(|a| [a, -a])
+                .max_by(|a, b| a.dot(&mean_up).total_cmp(&b.dot(&mean_up)))
+                .expect("six axes")
+        });
         let hips = [seg("upperleg01.L").0, seg("upperleg01.R").0];
         Ok(Self {
             segments,

@@ -189,3 +189,82 @@ fn shipped_mocap_poses_are_plausible() {
             .all(|(a, b)| (0..3).all(|i| (a[i] - b[i]).abs() < 1e-6))
     );
 }
+
+/// A DeepMimic frame (44 values: duration, root position and quaternion, then the joints), all
+/// quaternions identity unless given.
+fn deepmimic_frame(set: &[(usize, f64)]) -> Vec<f64> {
+    let mut v = vec![0.0; 44];
+    v[0] = 0.033;
+    v[2] = 0.9;
+    for k in [4, 8, 12, 16, 21, 25, 30, 35, 39] {
+        v[k] = 1.0;
+    }
+    for &(k, x) in set {
+        v[k] = x;
+    }
+    v
+}
+
+/// A DeepMimic motion retargets with the right sides and senses: a bent right knee (−0.8 rad
+/// about its Z) sends the body's right shin backwards while the thigh hangs, a bent left elbow
+/// (+1.2 rad) sends the forearm forwards, the right hip flexed 40° (a quaternion about Z)
+/// lifts the thigh forwards; an upright rest frame leaves the legs hanging straight down.
+#[test]
+fn deepmimic_motions_retarget_with_the_right_sides_and_senses() {
+    let model = BodyModel::builtin().unwrap();
+    let shaped = model
+        .shaped_phenotype::<f64>(&Phenotype::default())
+        .unwrap();
+    let half = 20f64.to_radians();
+    let frames = [
+        deepmimic_frame(&[]),
+        deepmimic_frame(&[(20, -0.8), (43, 1.2)]),
+        deepmimic_frame(&[(16, half.cos()), (19, half.sin())]),
+    ];
+    let text = serde_json::json!({ "Loop": "none", "Frames": frames }).to_string();
+    let bvh = Bvh::from_deepmimic(&text, "synthetic").unwrap();
+    assert_eq!(bvh.up, Some(Vector3::y()));
+    let r = Retarget::new(&model, &shaped, &bvh).unwrap();
+    let head = |b: &str| shaped.joint_heads[model.joint_index(b).unwrap()];
+    let left = head("upperleg01.L") - head("upperleg01.R");
+    let up = Vector3::z();
+    let forward = left.cross(&up).normalize();
+    let dir = |rotvecs: &[[f64; 3]], bone: &str| {
+        let c = model.joint_index(bone).unwrap();
+        let posed = model
+            .pose(&shaped, &Pose::from_axis_angles(rotvecs, Vector3::zeros()))
+            .unwrap();
+        posed.world_rotations[c] * (shaped.joint_tails[c] - shaped.joint_heads[c]).normalize()
+    };
+    let rest = r.frame(&bvh, 0).unwrap();
+    for bone in ["upperleg01.R", "lowerleg01.L"] {
+        assert!(dir(&rest, bone).dot(&up) < -0.99, "{bone} hangs");
+    }
+    let bent = r.frame(&bvh, 1).unwrap();
+    assert!(dir(&bent, "upperleg01.R").dot(&up) < -0.99);
+    let shin = dir(&bent, "lowerleg01.R");
+    assert!(
+        (shin.dot(&forward) + 0.8f64.sin()).abs() < 0.02,
+        "shin {shin:?}"
+    );
+    let forearm = dir(&bent, "lowerarm01.L");
+    assert!(forearm.dot(&forward) > 0.8, "forearm {forearm:?}");
+    let flexed = r.frame(&bvh, 2).unwrap();
+    let thigh = dir(&flexed, "upperleg01.R");
+    assert!(
+        (thigh.dot(&forward) - 40f64.to_radians().sin()).abs() < 0.02,
+        "thigh {thigh:?}"
+    );
+    assert!(dir(&flexed, "upperleg01.L").dot(&up) < -0.99);
+    // Broken motions are refused with a reason.
+    for (bad, why) in [
+        ("[1, 2]", "not a DeepMimic motion"),
+        (r#"{"Frames": []}"#, "no frames"),
+        (r#"{"Frames": [[0.1, 0.2]]}"#, "frame 0"),
+    ] {
+        let e = Bvh::from_deepmimic(bad, "m").unwrap_err().to_string();
+        assert!(e.contains(why), "{e}");
+    }
+    let zero_quat = serde_json::json!({ "Frames": [deepmimic_frame(&[(8, 0.0)])] }).to_string();
+    assert!(Bvh::from_deepmimic(&zero_quat, "m").is_err());
+}

@@ -45,15 +45,17 @@ pub enum BodyCommand {
         #[arg(long)]
         tolerance_m: Option<f64>,
     },
-    /// Retarget BVH motion capture to the body's 36 bones (the benchmark's persons).
+    /// Retarget motion capture (BVH or DeepMimic) to the body's 36 bones.
     ///
     /// Matches bone directions (pelvis frame, then each bone's smallest swing, parents first);
     /// keeps every N-th frame (from N/2). Writes a safetensors set (`rotvecs` N × 36 × 3 with the sources
-    /// and provenance as metadata) and a PNG preview sheet beside it.
+    /// and provenance as metadata) and a PNG preview sheet beside it. The benchmark's persons
+    /// and the pose prior's real training poses are made with it.
     ///
     /// Example: irmirror body retarget-bvh 1.bvh test2.bvh --every 120 --out poses.safetensors
     RetargetBvh {
-        /// BVH files (Mixamo-like or Rigify-like joint names).
+        /// BVH files (Mixamo-like or Rigify-like joint names) or DeepMimic motions (JSON,
+        /// `humanoid3d` character, e.g. pybullet_data/data/motions/humanoid3d_walk.txt).
         files: Vec<PathBuf>,
         /// Keep every N-th frame (120: every 4 s at 30 fps).
         #[arg(long, default_value_t = 120, value_parser = clap::value_parser!(u64).range(1..))]
@@ -271,7 +273,11 @@ fn retarget_bvh(files: &[PathBuf], every: usize, provenance: &str, out: &Path) -
         let name = f
             .file_name()
             .map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into());
-        let bvh = Bvh::parse(&text, &name)?;
+        let bvh = if text.trim_start().starts_with('{') {
+            Bvh::from_deepmimic(&text, &name)?
+        } else {
+            Bvh::parse(&text, &name)?
+        };
         let r = Retarget::new(&model, &shaped, &bvh)?;
         let before = set.poses.len();
         // Mid-interval frames: a capture's first frame is often its calibration T-pose.

@@ -160,6 +160,13 @@ enum Command {
         /// component): how far real poses stray from the archetypes.
         #[arg(long, default_value_t = irmirror_body::prior::generator::JOINT_NOISE_DEG)]
         joint_noise_deg: f64,
+        /// Real motion-capture poses to train on as well (a set `irmirror body retarget-bvh`
+        /// writes, e.g. assets/poses/mocap_deepmimic.safetensors). Never the benchmark's set.
+        #[arg(long)]
+        real_poses: Option<PathBuf>,
+        /// Share of the training set drawn from --real-poses (0–1; default 0.25 with them).
+        #[arg(long)]
+        real_fraction: Option<f64>,
     },
     /// The Table-1 benchmark: simulate captures, reconstruct with and without each step, score.
     ///
@@ -410,20 +417,32 @@ fn main() -> std::process::ExitCode {
             poses,
             batch,
             joint_noise_deg,
+            real_poses,
+            real_fraction,
         } => {
             if steps == 0 || poses < 100 || batch == 0 || !(0.0..=45.0).contains(&joint_noise_deg) {
                 Err(anyhow::anyhow!(
                     "--steps and --batch must be positive, --poses at least 100 and --joint-noise-deg within 0–45"
                 ))
+            } else if real_fraction.is_some_and(|f| !(0.0..=1.0).contains(&f)) {
+                Err(anyhow::anyhow!("--real-fraction must lie within 0–1"))
+            } else if real_fraction.is_some() && real_poses.is_none() {
+                Err(anyhow::anyhow!("--real-fraction needs --real-poses"))
             } else {
                 prior_cmd::run(
                     &out,
+                    real_poses.as_deref(),
                     irmirror_body::prior::train::TrainConfig {
                         poses,
                         steps,
                         batch,
                         seed,
                         joint_noise_deg,
+                        real_fraction: real_fraction.unwrap_or(if real_poses.is_some() {
+                            0.25
+                        } else {
+                            0.0
+                        }),
                         ..Default::default()
                     },
                     progress,

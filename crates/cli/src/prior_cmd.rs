@@ -2,14 +2,31 @@
 
 use crate::output::save_png;
 use anyhow::{Context, Result};
+use irmirror_body::mocap::MocapSet;
 use irmirror_body::prior::PosePrior;
 use irmirror_body::prior::train::{TrainConfig, train};
 use irmirror_body::{BodyModel, Phenotype, Pose};
 use std::path::Path;
 
-/// Trains and writes `out` (safetensors), `out` with `.json` (figures) and `.png` (samples).
-pub fn run(out: &Path, cfg: TrainConfig, progress: bool) -> Result<()> {
+/// Trains (on `real_poses` as well, when given) and writes `out` (safetensors), `out` with
+/// `.json` (figures) and `.png` (samples).
+pub fn run(out: &Path, real_poses: Option<&Path>, cfg: TrainConfig, progress: bool) -> Result<()> {
     let model = BodyModel::builtin()?;
+    let real = real_poses
+        .map(|p| -> Result<MocapSet> {
+            let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+            let set = MocapSet::from_bytes(&bytes, &p.display().to_string())?;
+            anyhow::ensure!(!set.poses.is_empty(), "{}: no poses", p.display());
+            anyhow::ensure!(
+                set.poses[0].len() == model.n_joints(),
+                "{}: poses of {} bones, the body has {}",
+                p.display(),
+                set.poses[0].len(),
+                model.n_joints()
+            );
+            Ok(set)
+        })
+        .transpose()?;
     let bar = if progress {
         indicatif::ProgressBar::new(cfg.steps as u64)
     } else {
@@ -21,7 +38,7 @@ pub fn run(out: &Path, cfg: TrainConfig, progress: bool) -> Result<()> {
         )
         .expect("valid template"),
     );
-    let (vae, report) = train(&model, &cfg, |step, loss| {
+    let (vae, report) = train(&model, &cfg, real.as_ref(), |step, loss| {
         bar.set_position(step as u64);
         bar.set_message(format!("{loss:.4}"));
     })?;

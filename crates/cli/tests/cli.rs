@@ -169,6 +169,38 @@ fn bad_inputs_fail_cleanly() {
             ],
             "--joint-noise-deg within 0–45",
         ),
+        (
+            vec![
+                "train-pose-prior".into(),
+                "--out".into(),
+                tmp("noisy.safetensors").display().to_string(),
+                "--real-fraction".into(),
+                "0.5".into(),
+            ],
+            "--real-fraction needs --real-poses",
+        ),
+        (
+            vec![
+                "train-pose-prior".into(),
+                "--out".into(),
+                tmp("noisy.safetensors").display().to_string(),
+                "--real-poses".into(),
+                "/nonexistent.safetensors".into(),
+                "--real-fraction".into(),
+                "1.5".into(),
+            ],
+            "--real-fraction must lie within 0–1",
+        ),
+        (
+            vec![
+                "train-pose-prior".into(),
+                "--out".into(),
+                tmp("noisy.safetensors").display().to_string(),
+                "--real-poses".into(),
+                "/nonexistent.safetensors".into(),
+            ],
+            "/nonexistent.safetensors",
+        ),
     ];
     for (args, expect) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -194,13 +226,20 @@ fn bad_inputs_fail_cleanly() {
     assert!(stderr(&o).contains("bad.safetensors"), "{}", stderr(&o));
     assert!(!tmp("s").exists(), "a failed run left an output directory");
     std::fs::remove_file(bad).ok();
-    // Motion capture: a missing file, and a file that is not BVH, are named; nothing written.
+    // Motion capture: a missing file, a file that is not BVH, and a DeepMimic motion with a
+    // short frame are named; nothing written.
     let not_bvh = tmp("notes.bvh");
     std::fs::write(&not_bvh, "just some text\n").unwrap();
+    let short = tmp("short_motion.txt");
+    std::fs::write(&short, r#"{"Loop": "none", "Frames": [[0.03, 0, 0.9, 0]]}"#).unwrap();
     let out = tmp("poses.safetensors");
     for (file, expect) in [
         ("/nonexistent.bvh", "/nonexistent.bvh"),
         (not_bvh.to_str().unwrap(), "notes.bvh: not a BVH file"),
+        (
+            short.to_str().unwrap(),
+            "short_motion.txt: frame 0: expected 44 finite values",
+        ),
     ] {
         let o = irmirror(&["body", "retarget-bvh", file, "--out", out.to_str().unwrap()]);
         assert!(!o.status.success(), "{file} succeeded");
@@ -209,6 +248,7 @@ fn bad_inputs_fail_cleanly() {
         assert!(!out.exists() && !out.with_extension("png").exists());
     }
     std::fs::remove_file(not_bvh).ok();
+    std::fs::remove_file(short).ok();
 }
 
 #[test]

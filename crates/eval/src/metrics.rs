@@ -44,37 +44,16 @@ pub fn mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
 /// MPJPE after the best similarity alignment of `a` onto `b` (Procrustes with scale, Umeyama),
 /// 3-D points. `None` for fewer than 3 points or degenerate sets.
 pub fn pa_mpjpe(a: &[Vec<f64>], b: &[Vec<f64>]) -> Option<f64> {
-    if a.len() != b.len() || a.len() < 3 || a.iter().chain(b).any(|p| p.len() != 3) {
+    if a.iter().chain(b).any(|p| p.len() != 3) {
         return None;
     }
     let v = |p: &Vec<f64>| nalgebra::Vector3::new(p[0], p[1], p[2]);
-    let n = a.len() as f64;
-    let (ma, mb) = (
-        a.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n,
-        b.iter().map(v).sum::<nalgebra::Vector3<f64>>() / n,
-    );
-    let mut cov = nalgebra::Matrix3::zeros();
-    let mut var_a = 0.0;
-    for (x, y) in a.iter().zip(b) {
-        let (da, db) = (v(x) - ma, v(y) - mb);
-        cov += db * da.transpose();
-        var_a += da.norm_squared();
-    }
-    if var_a < 1e-18 {
-        return None;
-    }
-    let svd = cov.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut d = nalgebra::Matrix3::identity();
-    if (u * vt).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = u * d * vt;
-    let s = (svd.singular_values.component_mul(&d.diagonal())).sum() / var_a;
-    let aligned: Vec<Vec<f64>> = a
+    let (va, vb): (Vec<_>, Vec<_>) = (a.iter().map(v).collect(), b.iter().map(v).collect());
+    let s = irmirror_geom::transform::Similarity3::umeyama(&va, &vb, true)?;
+    let aligned: Vec<Vec<f64>> = va
         .iter()
         .map(|x| {
-            let p = mb + r * (v(x) - ma) * s;
+            let p = s.transform_point(x);
             vec![p.x, p.y, p.z]
         })
         .collect();

@@ -177,6 +177,43 @@ impl<T: Real> Similarity3<T> {
     }
 }
 
+impl Similarity3<f64> {
+    /// The similarity `b_from_a` that best maps points `a` onto `b` in least squares (Umeyama
+    /// 1991: rotation by SVD of the cross-covariance, reflection excluded; scale included when
+    /// `with_scale`). `None` for fewer than 3 pairs, unequal lengths or a degenerate set.
+    pub fn umeyama(a: &[Vector3<f64>], b: &[Vector3<f64>], with_scale: bool) -> Option<Self> {
+        if a.len() != b.len() || a.len() < 3 {
+            return None;
+        }
+        let n = a.len() as f64;
+        let ma = a.iter().sum::<Vector3<f64>>() / n;
+        let mb = b.iter().sum::<Vector3<f64>>() / n;
+        let mut cov = Matrix3::zeros();
+        let mut var_a = 0.0;
+        for (x, y) in a.iter().zip(b) {
+            let (da, db) = (x - ma, y - mb);
+            cov += db * da.transpose();
+            var_a += da.norm_squared();
+        }
+        if var_a.is_nan() || var_a <= 1e-18 {
+            return None;
+        }
+        let svd = cov.svd(true, true);
+        let (u, vt) = (svd.u?, svd.v_t?);
+        let mut d = Matrix3::identity();
+        if (u * vt).determinant() < 0.0 {
+            d[(2, 2)] = -1.0;
+        }
+        let rotation = u * d * vt;
+        let scale = if with_scale {
+            svd.singular_values.component_mul(&d.diagonal()).sum() / var_a
+        } else {
+            1.0
+        };
+        Self::new(rotation, mb - rotation * ma * scale, scale).ok()
+    }
+}
+
 impl<T: Real> Mul for Similarity3<T> {
     type Output = Similarity3<T>;
     /// `a_from_b * b_from_c = a_from_c`.
@@ -283,5 +320,35 @@ mod tests {
             translation_m: [f64::INFINITY, 0.0, 0.0],
         };
         assert!(f.to_rigid().is_err());
+    }
+
+    /// Umeyama recovers a known rigid motion exactly (scale 1 when not asked for), a known
+    /// similarity with scale, never a mirror image, and refuses too few or unequal points.
+    #[test]
+    fn umeyama_recovers_known_alignments() {
+        let a: Vec<Vector3<f64>> = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.2, -0.3],
+            [0.4, 1.5, 0.2],
+            [-0.6, 0.3, 0.9],
+            [0.2, -0.8, 0.5],
+        ]
+        .map(Vector3::from)
+        .to_vec();
+        let r = rot(0.4, -0.9, 0.6);
+        let t = Vector3::new(0.5, -1.0, 2.0);
+        for (scale, with_scale) in [(1.0, false), (2.5, true)] {
+            let b: Vec<_> = a.iter().map(|p| r * p * scale + t).collect();
+            let s = Similarity3::umeyama(&a, &b, with_scale).unwrap();
+            assert!((s.rotation - r).norm() < 1e-9 && (s.translation - t).norm() < 1e-9);
+            assert!((s.scale - scale).abs() < 1e-9);
+        }
+        // A mirror image: the best proper rotation, not the reflection.
+        let m: Vec<_> = a.iter().map(|p| Vector3::new(-p.x, p.y, p.z)).collect();
+        let s = Similarity3::umeyama(&a, &m, false).unwrap();
+        assert!((s.rotation.determinant() - 1.0).abs() < 1e-9);
+        assert!(Similarity3::umeyama(&a[..2], &m[..2], false).is_none());
+        assert!(Similarity3::umeyama(&a, &m[..4], false).is_none());
+        assert!(Similarity3::umeyama(&[a[0]; 4], &m[..4], false).is_none());
     }
 }

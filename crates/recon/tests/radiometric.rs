@@ -269,3 +269,60 @@ fn mask_stratified_batch_on_a_footprint_takes_one_ray_per_pixel() {
         all_px.len()
     );
 }
+
+/// The thermal polish takes the best refined hypothesis by the rise and its front/back
+/// partner (`polish_best` = 1), or every refined hypothesis (0): only the polished ones' loss
+/// curves hold the polish's steps.
+#[test]
+fn the_thermal_polish_takes_the_best_and_its_partner() {
+    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
+    use irmirror_recon::human::radiometric::Radiometry;
+    use irmirror_recon::human::{HumanConfig, search::fit_human};
+    let (sc, sim, _) = car_capture(1);
+    let rays = true_object_footprint_rays(&sc, &sim);
+    let (with, without) = &sim.radiance;
+    let rise = irmirror_capture::Image {
+        data: with
+            .data
+            .iter()
+            .zip(&without.data)
+            .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
+            .collect(),
+        ..with.clone()
+    };
+    let pre = preprocessed(&sim, rise, Some(sc.ambient_c + ZERO_C_K), sc.sensor.blur_px);
+    let rad = Radiometry::new(&pre, &rays, model()).unwrap();
+    let mut problem = problem_for(
+        &sim,
+        &rays,
+        &sim.reflection_mask,
+        nalgebra::Vector3::z(),
+        None,
+    );
+    problem.radiometry = Some(&rad);
+    let mut cfg = HumanConfig {
+        iterations: 30,
+        top_k: 6,
+        ..HumanConfig::default()
+    };
+    cfg.radiometric.polish_iterations = 10;
+    // A small search: 4 facings × 3 distances, standing.
+    cfg.search.yaw_bins = 4;
+    cfg.search.distances = 3;
+    cfg.search.pose_modes = vec!["stand".into()];
+    let mut curves = |best: usize| -> Vec<usize> {
+        cfg.radiometric.polish_best = best;
+        let (fit, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
+        fit.hypotheses.iter().map(|h| h.loss_curve.len()).collect()
+    };
+    let all = curves(0);
+    let long = *all.iter().min().unwrap();
+    assert!(all.len() >= 3, "{all:?}");
+    let some = curves(1);
+    let polished = some.iter().filter(|&&n| n >= long).count();
+    assert!(
+        (1..=2).contains(&polished),
+        "{some:?} vs every one polished: {all:?}"
+    );
+    assert!(some.iter().any(|&n| n < long), "{some:?}");
+}

@@ -237,7 +237,19 @@ impl PoseGenerator {
         noise_deg: f64,
     ) -> (&'static str, Vec<[f64; 3]>) {
         let name = TEMPLATES[rng.random_range(0..TEMPLATES.len())];
-        let mut r = self.template(name, rng).expect("known template");
+        let r = self.template(name, rng).expect("known template");
+        (name, self.perturb(r, rng, noise_deg))
+    }
+
+    /// A pose (rotation vectors, any source: a template, motion capture) mirrored left/right
+    /// with probability ½, plus Gaussian joint noise of σ `noise_deg` per rotation-vector
+    /// component, root identity, clamped to the limits: what the training set holds.
+    pub fn perturb(
+        &self,
+        mut r: Vec<[f64; 3]>,
+        rng: &mut impl Rng,
+        noise_deg: f64,
+    ) -> Vec<[f64; 3]> {
         if rng.random_bool(0.5) {
             let m: Vec<[f64; 3]> = (0..self.n)
                 .map(|i| {
@@ -255,6 +267,6 @@ impl PoseGenerator {
         }
         r[0] = [0.0; 3];
         self.limits.clamp(&mut r);
-        (name, r)
+        r
     }
 }

@@ -1,13 +1,18 @@
 //! Training the pose VAE (`irmirror train-pose-prior`): Adam on `‖R̂ − R‖²_F + β KL`, β annealed
-//! from 0 over the first half, batches drawn from a fixed procedural pose set; deterministic for
-//! a seed (weights, data, noise and batches all come from the seeded generator).
+//! from 0 over the first half, batches drawn from a fixed pose set — procedural poses and,
+//! optionally, a share of real motion-capture poses (each mirrored with probability ½ and given
+//! the same joint noise); deterministic for a seed (weights, data, noise and batches all come
+//! from the seeded generator). The figures include encode → decode on the benchmark's persons
+//! ([`MocapSet::builtin`], never trained on): the floor the prior puts under any fit.
 
 use super::generator::PoseGenerator;
 use super::penetration::PenetrationTest;
 use super::{PosePrior, PoseVae, PriorError, features, rotation_angle};
-use crate::BodyModel;
+use crate::mocap::MocapSet;
+use crate::{BodyModel, Phenotype, Pose};
 use candle_core::{DType, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use irmirror_geom::Similarity3;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use nalgebra::Vector3;
 use rand::Rng;
@@ -32,6 +37,8 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Joint noise of the procedural pose set, degrees (σ per rotation-vector component).
     pub joint_noise_deg: f64,
+    /// Share of the training set drawn from real motion-capture poses (0 without them).
+    pub real_fraction: f64,
 }
 
 impl Default for TrainConfig {
@@ -45,6 +52,7 @@ impl Default for TrainConfig {
             kl_weight: 5e-3,
             seed: 0,
             joint_noise_deg: super::generator::JOINT_NOISE_DEG,
+            real_fraction: 0.0,
         }
     }
 }
@@ -72,6 +80,20 @@ pub struct TrainReport {
     pub training_self_penetration: f64,
     /// Fraction of decoded samples whose limb capsules overlap.
     pub samples_self_penetration: f64,
+    /// Real poses the training set drew from (0 without them).
+    pub real_poses: usize,
+    /// Provenance of the real poses ("" without them).
+    pub real_provenance: String,
+    /// The benchmark's persons (not trained on) encoded → decoded: mean joint angle, degrees.
+    pub benchmark_joint_error_deg: f64,
+    /// The same, per-vertex distance on the mean adult (root fixed), metres: median over poses.
+    pub benchmark_vertex_error_median_m: f64,
+    /// 90th percentile of the above.
+    pub benchmark_vertex_error_p90_m: f64,
+    /// The same after the best rigid alignment of the decoded body onto the true one: median.
+    pub benchmark_aligned_vertex_error_median_m: f64,
+    /// 90th percentile of the above.
+    pub benchmark_aligned_vertex_error_p90_m: f64,
 }
 
 fn matrices(poses: &[Vec<[f64; 3]>]) -> Vec<f64> {
@@ -86,19 +108,70 @@ fn matrices(poses: &[Vec<[f64; 3]>]) -> Vec<f64> {
         .collect()
 }
 
-/// Trains a prior; `progress(step, loss)` is called every 50 steps.
+/// Encode → decode of each pose: (mean joint angle over the 35 body joints, radians; per-vertex
+/// mean distance on the mean adult, metres, with the root fixed and after the best rigid
+/// alignment — what a fit that also finds the root's rotation and place is left with).
+pub fn round_trip_errors(
+    model: &BodyModel,
+    prior: &PosePrior,
+    poses: &[Vec<[f64; 3]>],
+) -> Result<Vec<(f64, f64, f64)>, PriorError> {
+    let shaped = model.shaped_phenotype::<f64>(&Phenotype::default())?;
+    poses
+        .iter()
+        .map(|p| {
+            let dec = prior.decode(&prior.encode(p)?)?;
+            let angle = p[1..]
+                .iter()
+                .zip(&dec[1..])
+                .map(|(w, m)| rotation_angle(&axis_angle_to_matrix(&Vector3::from(*w)), m))
+                .sum::<f64>()
+                / super::JOINTS as f64;
+            let mut truth = Pose::from_axis_angles(p, Vector3::zeros());
+            truth.rotations[0] = nalgebra::Matrix3::identity();
+            let fit = Pose {
+                rotations: dec,
+                translation: Vector3::zeros(),
+            };
+            let a = model.pose(&shaped, &truth)?.vertices;
+            let b = model.pose(&shaped, &fit)?.vertices;
+            let mean_dist = |b: &[Vector3<f64>]| {
+                a.iter().zip(b).map(|(x, y)| (x - y).norm()).sum::<f64>() / a.len() as f64
+            };
+            let aligned = Similarity3::umeyama(&b, &a, false).map_or(f64::NAN, |s| {
+                mean_dist(&b.iter().map(|x| s.transform_point(x)).collect::<Vec<_>>())
+            });
+            Ok((angle, mean_dist(&b), aligned))
+        })
+        .collect()
+}
+
+/// Trains a prior on procedural poses and, when `real` is given, a `cfg.real_fraction` share of
+/// its poses; `progress(step, loss)` is called every 50 steps.
 pub fn train(
     model: &BodyModel,
     cfg: &TrainConfig,
+    real: Option<&MocapSet>,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<(PoseVae, TrainReport), PriorError> {
     let poses_gen = PoseGenerator::new(model);
     let mut data_rng = irmirror_geom::rng::seeded(cfg.seed, 1);
+    let real_poses = real.map_or(&[][..], |r| &r.poses[..]);
+    let n_real = if real_poses.is_empty() {
+        0
+    } else {
+        (cfg.poses as f64 * cfg.real_fraction.clamp(0.0, 1.0)).round() as usize
+    };
     let poses: Vec<Vec<[f64; 3]>> = (0..cfg.poses)
-        .map(|_| {
-            poses_gen
-                .sample_with_noise(&mut data_rng, cfg.joint_noise_deg)
-                .1
+        .map(|k| {
+            if k < n_real {
+                let p = real_poses[k % real_poses.len()].clone();
+                poses_gen.perturb(p, &mut data_rng, cfg.joint_noise_deg)
+            } else {
+                poses_gen
+                    .sample_with_noise(&mut data_rng, cfg.joint_noise_deg)
+                    .1
+            }
         })
         .collect();
     let mut hold_rng = irmirror_geom::rng::seeded(cfg.seed, 2);
@@ -196,6 +269,13 @@ pub fn train(
         .filter(|p| pen.penetrates(p))
         .count() as f64
         / poses.len().min(20_000) as f64;
+    let bench = MocapSet::builtin()?;
+    let trips = round_trip_errors(model, &prior, &bench.poses)?;
+    let quantile = |q: f64, pick: fn(&(f64, f64, f64)) -> f64| {
+        let mut v: Vec<f64> = trips.iter().map(pick).collect();
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q).round() as usize]
+    };
     let report = TrainReport {
         config: cfg.clone(),
         train_s,
@@ -207,6 +287,14 @@ pub fn train(
         joints_outside_limits_5deg: joints5 as f64 / (n_samples * super::JOINTS) as f64,
         training_self_penetration: pen_train,
         samples_self_penetration: pen_s as f64 / n_samples as f64,
+        real_poses: real_poses.len(),
+        real_provenance: real.map_or_else(String::new, |r| r.provenance.clone()),
+        benchmark_joint_error_deg: (trips.iter().map(|t| t.0).sum::<f64>() / trips.len() as f64)
+            .to_degrees(),
+        benchmark_vertex_error_median_m: quantile(0.5, |t| t.1),
+        benchmark_vertex_error_p90_m: quantile(0.9, |t| t.1),
+        benchmark_aligned_vertex_error_median_m: quantile(0.5, |t| t.2),
+        benchmark_aligned_vertex_error_p90_m: quantile(0.9, |t| t.2),
     };
     Ok((vae, report))
 }

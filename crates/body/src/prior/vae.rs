@@ -29,6 +29,9 @@ pub enum PriorError {
     /// A tensor operation failed (shape mismatch, I/O …).
     #[error("pose prior: {0}")]
     Candle(#[from] candle_core::Error),
+    /// The body model or a pose set failed (the training figures pose the body).
+    #[error("pose prior: {0}")]
+    Body(#[from] crate::BodyError),
     /// The weights file is not a pose prior.
     #[error("pose prior weights {path}: {reason}")]
     Weights {

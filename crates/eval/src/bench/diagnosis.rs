@@ -85,14 +85,14 @@ pub struct Diagnosis {
     /// Root error after that refinement, m.
     #[serde(default)]
     pub truth_start_root_error_m: Option<f64>,
-    /// Our model *at* the truth, before any step (true root position, rotation and height
-    /// slider, the pose prior's encoding of the true pose, mean-adult proportions): its data
-    /// term. What the pose prior and the mean adult can state of this person.
+    /// Our model *at* the truth, before any step (the true height slider, the pose prior's
+    /// encoding of the true pose, mean-adult proportions, the root placed by the rigid motion
+    /// that best aligns it onto the true mesh): its data term. What the pose prior and the mean
+    /// adult can state of this person.
     #[serde(default)]
     pub model_truth_loss: Option<f64>,
     /// The same state's mean per-vertex error against the true body, m: the floor the pose
-    /// prior (and the mean adult's proportions) put under any fit's per-vertex error, the root
-    /// being exact.
+    /// prior (and the mean adult's proportions) put under any fit's per-vertex error.
     #[serde(default)]
     pub model_truth_vertex_error_m: Option<f64>,
     /// The true body turned 180° about the up axis through its root, scored by the data term:
@@ -201,9 +201,9 @@ pub(super) fn diagnose(
         .zip(&hypothesis_facing_errors_deg)
         .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
         .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
-    let truth_state = model_truth(p, priors)?;
+    let truth_state = model_truth(p, priors, &truth)?;
     let (truth_start_loss, truth_start_root_error_m) =
-        refine_from_truth(&truth_state, priors, rec, (seed, cfg))?
+        refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
     let at_truth = posed_body(model, prior, &truth_state)?;
     let model_truth_loss = Some(problem.mesh_data_loss(&at_truth.vertices, &hcfg).0);
@@ -239,6 +239,7 @@ pub(super) fn diagnose(
 /// root error; `None` when it diverged.
 fn refine_from_truth(
     truth: &HumanState,
+    true_root: Vector3<f64>,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
     (seed, cfg): (u64, &ReconConfig),
@@ -258,20 +259,40 @@ fn refine_from_truth(
         return Ok(None);
     };
     let data = problem.full_eval(&end, &hcfg)?.data;
-    Ok(Some((data, (end.translation - truth.translation).norm())))
+    Ok(Some((data, (end.translation - true_root).norm())))
 }
 
-/// The truth as stage 2's model states it: true root position and rotation, the true height
-/// slider, the pose prior's encoding of the true pose (mean-adult proportions otherwise).
-fn model_truth(p: &Prepared, priors: BodyPriors<'_>) -> Result<HumanState, EvalError> {
+/// The truth as stage 2's model states it: the true height slider, the pose prior's encoding of
+/// the true pose (mean-adult proportions otherwise), and the root placed by the rigid motion
+/// that best aligns that body onto the true mesh `truth` (from the true root position and
+/// rotation): a fit finds the root's place and rotation, so a prior whose encoding tilts the
+/// whole body is not charged for the tilt.
+fn model_truth(
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    truth: &[Vector3<f64>],
+) -> Result<HumanState, EvalError> {
     let person = &p.scene.person;
-    Ok(HumanState {
+    let at_root = HumanState {
         translation: p.sim.body.joints[0],
         rotation: p.sim.body.depth_from_anny.rotation
             * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(person.rotvec_rad[0])),
         height: person.phenotype.height,
         latent: priors.prior.encode(&person.rotvec_rad)?,
-    })
+    };
+    let ours = posed_body(priors.model, priors.prior, &at_root)?.vertices;
+    // Vertices are root rotation × rest-relative offsets + root, so a rigid motion of every
+    // vertex is the same motion of the root.
+    Ok(
+        match irmirror_geom::Similarity3::umeyama(&ours, truth, false) {
+            Some(a) => HumanState {
+                translation: a.transform_point(&at_root.translation),
+                rotation: a.rotation * at_root.rotation,
+                ..at_root
+            },
+            None => at_root,
+        },
+    )
 }
 
 /// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every

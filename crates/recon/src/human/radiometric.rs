@@ -81,6 +81,10 @@ pub struct RadiometricConfig {
     /// Steps of the thermal rise after a search and refinement on the mask (0: the rise from
     /// the search's rounds on).
     pub polish_iterations: usize,
+    /// Refined hypotheses that take the polish: the best this many by the rise before it, and
+    /// the best one's front/back partner (the pair the rise is there to tell apart); the others
+    /// are ranked on the rise as they stand. 0: every hypothesis.
+    pub polish_best: usize,
     /// Integrate each pixel's footprint (4 rays through the pixel's box, their mean convolved
     /// with the capture's point spread; [`crate::pipeline::FOOTPRINT_OFFSETS`]) rather than
     /// one ray at its centre, when the reflection mask has at most this many pixels (0: never).
@@ -100,6 +104,7 @@ impl Default for RadiometricConfig {
             reflectance_bound_sigmas: 2.0,
             huber_sigmas: 3.0,
             polish_iterations: 40,
+            polish_best: 1,
             footprint_max_mask_px: 1000,
         }
     }

@@ -18,7 +18,8 @@
 //!    uniform sample of the others, importance-weighted ([`HumanProblem::stratified_batch`]).
 //!    Screening scores the mask (overlap is what sorts a grid at its blur). With the
 //!    radiometric term on ([`super::radiometric`]) and `polish_iterations` > 0 (default 40) the
-//!    rounds and the refinement fit the mask too, each refined hypothesis then takes that many
+//!    rounds and the refinement fit the mask too, the best `polish_best` refined hypotheses by
+//!    the rise (default 1; 0: all) and the best one's front/back partner then take that many
 //!    steps on the thermal rise, and the final ranking is on the rise — where front and back
 //!    differ; with 0 the rounds and the refinement fit the rise throughout.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
@@ -448,6 +449,68 @@ pub struct Stratified {
     pub rise: Option<(Selection, Vec<f64>)>,
 }
 
+/// The seed of survivor `k`'s refinement (and of its polish).
+fn run_seed(seed: u64, k: usize) -> u64 {
+    seed.wrapping_mul(1000).wrapping_add(k as u64)
+}
+
+/// The thermal polish: `polish_iterations` steps on the rise for the best `polish_best` refined
+/// hypotheses by the rise (all when 0) and the best one's front/back partner, in parallel;
+/// their loss curves extended.
+fn polish_rise(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    edge_dist: &irmirror_capture::Image<f64>,
+    seed: u64,
+    refined: &mut [Option<(usize, HumanState, Vec<f64>)>],
+) -> Result<(), ReconError> {
+    let rc = &cfg.radiometric;
+    let mut order: Vec<(usize, f64)> = refined
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.as_ref().map(|(_, st, _)| (i, st)))
+        .map(|(i, st)| Ok((i, problem.full_eval(st, cfg)?.data)))
+        .collect::<Result<_, ReconError>>()?;
+    order.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let n = if rc.polish_best == 0 {
+        order.len()
+    } else {
+        rc.polish_best.min(order.len())
+    };
+    let mut chosen: Vec<usize> = order[..n].iter().map(|o| o.0).collect();
+    if let Some(&(best, _)) = order.first() {
+        let up = problem.up.normalize();
+        let rot = |i: usize| refined[i].as_ref().map(|r| r.1.rotation);
+        let partner = order[n..].iter().map(|o| o.0).find(|&i| {
+            matches!((rot(best), rot(i)), (Some(a), Some(b)) if facing_angle_deg(&up, &a, &b) > 135.0)
+        });
+        chosen.extend(partner);
+    }
+    let polish_cfg = HumanConfig {
+        iterations: rc.polish_iterations,
+        sigma_m2: [cfg.sigma_m2[1]; 2],
+        ..cfg.clone()
+    };
+    let polished: Vec<_> = chosen
+        .par_iter()
+        .map(|&i| {
+            let (k, st, _) = refined[i].as_ref().expect("chosen among the refined");
+            let r = problem.run(st, &polish_cfg, Draw::Edge(edge_dist), run_seed(seed, *k))?;
+            Ok((i, r))
+        })
+        .collect::<Result<_, ReconError>>()?;
+    for (i, r) in polished {
+        refined[i] = match (refined[i].take(), r) {
+            (Some((k, _, mut curve)), Some((st, c))) => {
+                curve.extend(c);
+                Some((k, st, curve))
+            }
+            _ => None,
+        };
+    }
+    Ok(())
+}
+
 /// Fits the person: global search, every survivor refined in parallel, best first, its
 /// front/back partner next, distinct top-k.
 pub fn fit_human(
@@ -471,36 +534,23 @@ pub fn fit_human(
     let t0 = std::time::Instant::now();
     let edge_dist = edge_distance(problem.mask);
     type Run = Option<(usize, HumanState, Vec<f64>)>;
-    let results: Vec<Result<Run, ReconError>> = inits
+    let mut refined: Vec<Run> = inits
         .par_iter()
         .enumerate()
         .map(|(k, init)| {
-            let run_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
-            let mut r = problem.run(init, &mask_cfg, Draw::Edge(&edge_dist), run_seed)?;
-            if polish > 0
-                && let Some((st, mut curve)) = r.take()
-            {
-                let polish_cfg = HumanConfig {
-                    iterations: polish,
-                    sigma_m2: [cfg.sigma_m2[1]; 2],
-                    ..cfg.clone()
-                };
-                r = problem
-                    .run(&st, &polish_cfg, Draw::Edge(&edge_dist), run_seed)?
-                    .map(|(s, c)| {
-                        curve.extend(c);
-                        (s, curve)
-                    });
-            }
+            let r = problem.run(init, &mask_cfg, Draw::Edge(&edge_dist), run_seed(seed, k))?;
             progress(k);
             Ok(r.map(|(s, c)| (k, s, c)))
         })
-        .collect();
+        .collect::<Result<_, ReconError>>()?;
+    if polish > 0 {
+        polish_rise(problem, cfg, &edge_dist, seed, &mut refined)?;
+    }
     tracing::debug!("refinement: {:.2} s", t0.elapsed().as_secs_f64());
     let mut done = Vec::new();
     let mut diverged = 0;
-    for r in results {
-        match r? {
+    for r in refined {
+        match r {
             Some(x) => done.push(x),
             None => diverged += 1,
         }
