@@ -114,7 +114,7 @@ fn demo_is_deterministic_and_complete() {
 fn bad_inputs_fail_cleanly() {
     let vectors =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/body/test_vectors_body36.json");
-    let cases: Vec<(Vec<String>, &str)> = vec![
+    let mut cases: Vec<(Vec<String>, &str)> = vec![
         (
             vec![
                 "body".into(),
@@ -159,49 +159,39 @@ fn bad_inputs_fail_cleanly() {
             ],
             "--rank",
         ),
+    ];
+    // train-pose-prior: each case's flags after `--out`.
+    let noisy = tmp("noisy.safetensors").display().to_string();
+    for (flags, expect) in [
         (
-            vec![
-                "train-pose-prior".into(),
-                "--out".into(),
-                tmp("noisy.safetensors").display().to_string(),
-                "--joint-noise-deg".into(),
-                "90".into(),
-            ],
+            &["--joint-noise-deg", "90"][..],
             "--joint-noise-deg within 0–45",
         ),
         (
-            vec![
-                "train-pose-prior".into(),
-                "--out".into(),
-                tmp("noisy.safetensors").display().to_string(),
-                "--real-fraction".into(),
-                "0.5".into(),
-            ],
+            &["--real-fraction", "0.5"],
             "--real-fraction needs --real-poses",
         ),
         (
-            vec![
-                "train-pose-prior".into(),
-                "--out".into(),
-                tmp("noisy.safetensors").display().to_string(),
-                "--real-poses".into(),
-                "/nonexistent.safetensors".into(),
-                "--real-fraction".into(),
-                "1.5".into(),
+            &[
+                "--real-poses",
+                "/nonexistent.safetensors",
+                "--real-fraction",
+                "1.5",
             ],
             "--real-fraction must lie within 0–1",
         ),
         (
-            vec![
-                "train-pose-prior".into(),
-                "--out".into(),
-                tmp("noisy.safetensors").display().to_string(),
-                "--real-poses".into(),
-                "/nonexistent.safetensors".into(),
-            ],
+            &["--real-poses", "/nonexistent.safetensors"],
             "/nonexistent.safetensors",
         ),
-    ];
+    ] {
+        let args = ["train-pose-prior", "--out", noisy.as_str()]
+            .iter()
+            .chain(flags)
+            .map(|a| a.to_string())
+            .collect();
+        cases.push((args, expect));
+    }
     for (args, expect) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let o = irmirror(&args);

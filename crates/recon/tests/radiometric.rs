@@ -199,14 +199,7 @@ fn thermal_stratified_batch_draws_whole_pixels() {
         sc.sensor.blur_px,
     );
     let rad = Radiometry::new(&pre, &rays, model()).unwrap();
-    let mut problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        nalgebra::Vector3::z(),
-        None,
-    );
-    problem.radiometry = Some(&rad);
+    let problem = thermal_problem(&sim, &rays, &rad);
     let sample = problem.stratified_batch(1200, 3, true);
     let (sel, weight) = sample.rise.as_ref().unwrap();
     let total: f64 = weight.iter().sum();
@@ -292,14 +285,7 @@ fn the_thermal_polish_takes_the_best_and_its_partner() {
     };
     let pre = preprocessed(&sim, rise, Some(sc.ambient_c + ZERO_C_K), sc.sensor.blur_px);
     let rad = Radiometry::new(&pre, &rays, model()).unwrap();
-    let mut problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        nalgebra::Vector3::z(),
-        None,
-    );
-    problem.radiometry = Some(&rad);
+    let problem = thermal_problem(&sim, &rays, &rad);
     let mut cfg = HumanConfig {
         iterations: 30,
         top_k: 6,
@@ -325,4 +311,21 @@ fn the_thermal_polish_takes_the_best_and_its_partner() {
         "{some:?} vs every one polished: {all:?}"
     );
     assert!(some.iter().any(|&n| n < long), "{some:?}");
+}
+
+/// Stage 2's problem on `rays` (up +Z, no floor) with the radiometric term `rad`.
+fn thermal_problem<'a>(
+    sim: &'a irmirror_sim::Simulation,
+    rays: &'a irmirror_render::reflect::ReflectedRays<f64>,
+    rad: &'a irmirror_recon::human::radiometric::Radiometry,
+) -> irmirror_recon::human::HumanProblem<'a> {
+    let mut problem = problem_for(
+        sim,
+        rays,
+        &sim.reflection_mask,
+        nalgebra::Vector3::z(),
+        None,
+    );
+    problem.radiometry = Some(rad);
+    problem
 }
