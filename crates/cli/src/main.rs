@@ -161,7 +161,8 @@ enum Command {
         #[arg(long, default_value_t = irmirror_body::prior::generator::JOINT_NOISE_DEG)]
         joint_noise_deg: f64,
         /// Real motion-capture poses to train on as well (a set `irmirror body retarget-bvh`
-        /// writes, e.g. assets/poses/mocap_deepmimic.safetensors). Never the benchmark's set.
+        /// writes, e.g. assets/poses/mocap_deepmimic.safetensors). The benchmark's own persons
+        /// are refused: they are its held-out truth.
         #[arg(long)]
         real_poses: Option<PathBuf>,
         /// Share of the training set drawn from --real-poses (0–1; default 0.25 with them).

@@ -24,6 +24,25 @@ pub fn run(out: &Path, real_poses: Option<&Path>, cfg: TrainConfig, progress: bo
                 set.poses[0].len(),
                 model.n_joints()
             );
+            // The benchmark's persons are its held-out truth: a prior trained on them would
+            // know the answers.
+            let bench = MocapSet::builtin()?;
+            let shared = set
+                .poses
+                .iter()
+                .filter(|p| {
+                    bench.poses.iter().any(|b| {
+                        b.iter()
+                            .zip(p.iter())
+                            .all(|(x, y)| x.iter().zip(y).all(|(u, v)| (u - v).abs() < 1e-6))
+                    })
+                })
+                .count();
+            anyhow::ensure!(
+                shared == 0,
+                "{}: {shared} of its poses are the benchmark's persons (assets/poses/mocap_bvhtools.safetensors); the prior must not train on the benchmark's truth",
+                p.display()
+            );
             Ok(set)
         })
         .transpose()?;

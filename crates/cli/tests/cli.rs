@@ -160,8 +160,13 @@ fn bad_inputs_fail_cleanly() {
             "--rank",
         ),
     ];
-    // train-pose-prior: each case's flags after `--out`.
+    // train-pose-prior: each case's flags after `--out`; the benchmark's own persons are refused
+    // as training poses.
     let noisy = tmp("noisy.safetensors").display().to_string();
+    let bench_poses = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../assets/poses/mocap_bvhtools.safetensors")
+        .display()
+        .to_string();
     for (flags, expect) in [
         (
             &["--joint-noise-deg", "90"][..],
@@ -183,6 +188,10 @@ fn bad_inputs_fail_cleanly() {
         (
             &["--real-poses", "/nonexistent.safetensors"],
             "/nonexistent.safetensors",
+        ),
+        (
+            &["--real-poses", bench_poses.as_str()],
+            "119 of its poses are the benchmark's persons",
         ),
     ] {
         let args = ["train-pose-prior", "--out", noisy.as_str()]
