@@ -28,7 +28,7 @@
 //!    sampling, σ annealed to `sigma_m2[1]`), and are ranked on all rays.
 
 use super::observe::Selection;
-use super::problem::{Draw, Scratch};
+use super::problem::{Draw, FullEval, Scratch};
 use super::{
     Batch, FittedRadiometry, HumanConfig, HumanFit, HumanProblem, HumanState, Hypothesis,
     edge_distance, shaped_body, stature_m, upright_facing,
@@ -454,38 +454,61 @@ fn run_seed(seed: u64, k: usize) -> u64 {
     seed.wrapping_mul(1000).wrapping_add(k as u64)
 }
 
+/// A refined survivor: its index among the starts, end state, loss curve, and its evaluation
+/// on all rays when one was made for that state (the polish's ranking), so the final scoring
+/// does not repeat it.
+struct Refined {
+    init: usize,
+    state: HumanState,
+    curve: Vec<f64>,
+    eval: Option<FullEval>,
+}
+
 /// The thermal polish: `polish_iterations` steps on the rise for the best `polish_best` refined
 /// hypotheses by the rise (all when 0) and the best one's front/back partner, in parallel;
-/// their loss curves extended.
+/// their loss curves extended. A polish that diverges drops its hypothesis.
 fn polish_rise(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
     edge_dist: &irmirror_capture::Image<f64>,
     seed: u64,
-    refined: &mut [Option<(usize, HumanState, Vec<f64>)>],
+    refined: &mut [Option<Refined>],
 ) -> Result<(), ReconError> {
     let rc = &cfg.radiometric;
-    let mut order: Vec<(usize, f64)> = refined
-        .par_iter()
-        .enumerate()
-        .filter_map(|(i, r)| r.as_ref().map(|(_, st, _)| (i, st)))
-        .map(|(i, st)| Ok((i, problem.full_eval(st, cfg)?.data)))
-        .collect::<Result<_, ReconError>>()?;
-    order.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let n = if rc.polish_best == 0 {
-        order.len()
+    let live: Vec<usize> = (0..refined.len())
+        .filter(|&i| refined[i].is_some())
+        .collect();
+    let chosen: Vec<usize> = if rc.polish_best == 0 {
+        live
     } else {
-        rc.polish_best.min(order.len())
+        // Rank on the rise; the evaluations stay with the hypotheses not polished.
+        let evals: Vec<FullEval> = live
+            .par_iter()
+            .map(|&i| {
+                let r = refined[i].as_ref().expect("live");
+                problem.full_eval(&r.state, cfg)
+            })
+            .collect::<Result<_, ReconError>>()?;
+        let mut order: Vec<(usize, f64)> =
+            live.iter().zip(&evals).map(|(&i, e)| (i, e.data)).collect();
+        for (&i, e) in live.iter().zip(evals) {
+            if let Some(r) = refined[i].as_mut() {
+                r.eval = Some(e);
+            }
+        }
+        order.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let n = rc.polish_best.min(order.len());
+        let mut chosen: Vec<usize> = order[..n].iter().map(|o| o.0).collect();
+        if let Some(&(best, _)) = order.first() {
+            let up = problem.up.normalize();
+            let rot = |i: usize| refined[i].as_ref().map(|r| r.state.rotation);
+            let partner = order[n..].iter().map(|o| o.0).find(|&i| {
+                matches!((rot(best), rot(i)), (Some(a), Some(b)) if facing_angle_deg(&up, &a, &b) > 135.0)
+            });
+            chosen.extend(partner);
+        }
+        chosen
     };
-    let mut chosen: Vec<usize> = order[..n].iter().map(|o| o.0).collect();
-    if let Some(&(best, _)) = order.first() {
-        let up = problem.up.normalize();
-        let rot = |i: usize| refined[i].as_ref().map(|r| r.1.rotation);
-        let partner = order[n..].iter().map(|o| o.0).find(|&i| {
-            matches!((rot(best), rot(i)), (Some(a), Some(b)) if facing_angle_deg(&up, &a, &b) > 135.0)
-        });
-        chosen.extend(partner);
-    }
     let polish_cfg = HumanConfig {
         iterations: rc.polish_iterations,
         sigma_m2: [cfg.sigma_m2[1]; 2],
@@ -494,16 +517,23 @@ fn polish_rise(
     let polished: Vec<_> = chosen
         .par_iter()
         .map(|&i| {
-            let (k, st, _) = refined[i].as_ref().expect("chosen among the refined");
-            let r = problem.run(st, &polish_cfg, Draw::Edge(edge_dist), run_seed(seed, *k))?;
-            Ok((i, r))
+            let r = refined[i].as_ref().expect("chosen among the refined");
+            let end = problem.run(
+                &r.state,
+                &polish_cfg,
+                Draw::Edge(edge_dist),
+                run_seed(seed, r.init),
+            )?;
+            Ok((i, end))
         })
         .collect::<Result<_, ReconError>>()?;
-    for (i, r) in polished {
-        refined[i] = match (refined[i].take(), r) {
-            (Some((k, _, mut curve)), Some((st, c))) => {
-                curve.extend(c);
-                Some((k, st, curve))
+    for (i, end) in polished {
+        refined[i] = match (refined[i].take(), end) {
+            (Some(mut r), Some((state, c))) => {
+                r.curve.extend(c);
+                r.state = state;
+                r.eval = None;
+                Some(r)
             }
             _ => None,
         };
@@ -533,28 +563,26 @@ pub fn fit_human(
     let inits = problem.initial_states(&mask_cfg, seed)?;
     let t0 = std::time::Instant::now();
     let edge_dist = edge_distance(problem.mask);
-    type Run = Option<(usize, HumanState, Vec<f64>)>;
-    let mut refined: Vec<Run> = inits
+    let mut refined: Vec<Option<Refined>> = inits
         .par_iter()
         .enumerate()
         .map(|(k, init)| {
             let r = problem.run(init, &mask_cfg, Draw::Edge(&edge_dist), run_seed(seed, k))?;
             progress(k);
-            Ok(r.map(|(s, c)| (k, s, c)))
+            Ok(r.map(|(state, curve)| Refined {
+                init: k,
+                state,
+                curve,
+                eval: None,
+            }))
         })
         .collect::<Result<_, ReconError>>()?;
     if polish > 0 {
         polish_rise(problem, cfg, &edge_dist, seed, &mut refined)?;
     }
     tracing::debug!("refinement: {:.2} s", t0.elapsed().as_secs_f64());
-    let mut done = Vec::new();
-    let mut diverged = 0;
-    for r in refined {
-        match r {
-            Some(x) => done.push(x),
-            None => diverged += 1,
-        }
-    }
+    let diverged = refined.iter().filter(|r| r.is_none()).count();
+    let done: Vec<Refined> = refined.into_iter().flatten().collect();
     if done.is_empty() {
         return Err(ReconError::Diverged {
             stage: "human fit",
@@ -563,14 +591,18 @@ pub fn fit_human(
     }
     let mut scored: Vec<(Hypothesis, HumanState)> = done
         .into_par_iter()
-        .map(|(k, st, curve)| {
-            let eval = problem.full_eval(&st, cfg)?;
+        .map(|r| {
+            let st = r.state;
+            let eval = match r.eval {
+                Some(e) => e,
+                None => problem.full_eval(&st, cfg)?,
+            };
             let radiometry = problem
                 .radiometric(cfg)
                 .zip(eval.scalars.as_ref())
                 .map(|(r, s)| FittedRadiometry::new(r, s));
             let h = Hypothesis {
-                init: k,
+                init: r.init,
                 translation_m: st.translation.into(),
                 root_rotvec_rad: matrix_to_axis_angle(&st.rotation).into(),
                 height: st.height,
@@ -580,7 +612,7 @@ pub fn fit_human(
                 data_loss: eval.data,
                 soft_iou: eval.soft_iou,
                 radiometry,
-                loss_curve: curve,
+                loss_curve: r.curve,
             };
             Ok((h, st))
         })
