@@ -125,6 +125,48 @@ impl<T: Real> Bvh<T> {
         });
     }
 
+    /// Whether `test(triangle)` holds for any triangle whose box, inflated by `radius`, meets
+    /// the half-line (as [`Self::for_each_near_ray`]); stops at the first that does.
+    pub fn any_near_ray(
+        &self,
+        o: &Vector3<T>,
+        inv_r: &Vector3<T>,
+        radius: T,
+        mut test: impl FnMut(u32) -> bool,
+    ) -> bool {
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let mut stack = [0u32; STACK];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let n = &self.nodes[stack[top] as usize];
+            if !slab_hit(
+                &(n.lo.add_scalar(-radius)),
+                &(n.hi.add_scalar(radius)),
+                o,
+                inv_r,
+            ) {
+                continue;
+            }
+            if n.count > 0 {
+                if self.order[n.first as usize..(n.first + n.count) as usize]
+                    .iter()
+                    .any(|&t| test(t))
+                {
+                    return true;
+                }
+            } else {
+                debug_assert!(top + 2 <= STACK);
+                stack[top] = n.right;
+                stack[top + 1] = n.first;
+                top += 2;
+            }
+        }
+        false
+    }
+
     /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
     /// larger): a nearest-element search prunes the boxes beyond its best distance so far.
     pub fn for_each_near_ray_shrinking(
@@ -190,4 +232,58 @@ fn slab_hit<T: Real>(lo: &Vector3<T>, hi: &Vector3<T>, o: &Vector3<T>, inv_r: &V
 /// Component-wise reciprocal of a direction (infinite where a component is zero).
 pub fn inverse_dir<T: Real>(r: &Vector3<T>) -> Vector3<T> {
     r.map(|x| T::one() / x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The early-exit query answers what visiting every near triangle would, and stops early:
+    /// on a random triangle soup, for random rays and radii, `any_near_ray` with a test is true
+    /// exactly when some triangle `for_each_near_ray` visits passes it, and with a test that
+    /// always passes it calls it once.
+    #[test]
+    fn any_near_ray_agrees_with_visiting_every_triangle() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut u = |lo: f64, hi: f64| rng.random_range(lo..hi);
+        let mut vertices = Vec::new();
+        let mut triangles = Vec::new();
+        for k in 0..300u32 {
+            let c = Vector3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
+            for _ in 0..3 {
+                vertices.push(c + Vector3::new(u(-0.1, 0.1), u(-0.1, 0.1), u(-0.1, 0.1)));
+            }
+            triangles.push([3 * k, 3 * k + 1, 3 * k + 2]);
+        }
+        let bvh = Bvh::build(&vertices, &triangles);
+        let (mut some, mut none) = (0, 0);
+        for _ in 0..200 {
+            let o = Vector3::new(u(-2.0, 2.0), u(-2.0, 2.0), -3.0);
+            let r = (Vector3::new(u(-1.0, 1.0), u(-1.0, 1.0), 3.0) - o).normalize();
+            let radius = u(0.0, 0.05);
+            let inv = inverse_dir(&r);
+            let test = |t: u32| t.is_multiple_of(7);
+            let mut visited = Vec::new();
+            bvh.for_each_near_ray(&o, &inv, radius, |t| visited.push(t));
+            let expected = visited.iter().any(|&t| test(t));
+            assert_eq!(bvh.any_near_ray(&o, &inv, radius, test), expected);
+            let mut calls = 0;
+            let any = bvh.any_near_ray(&o, &inv, radius, |_| {
+                calls += 1;
+                true
+            });
+            assert_eq!(any, !visited.is_empty());
+            assert!(calls <= 1);
+            if visited.is_empty() {
+                none += 1
+            } else {
+                some += 1
+            }
+        }
+        assert!(
+            some > 20 && none > 20,
+            "{some} rays near triangles, {none} not"
+        );
+    }
 }

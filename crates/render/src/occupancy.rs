@@ -329,13 +329,18 @@ impl<T: Real> SoftRenderer<T> {
         });
     }
 
-    /// Does the half-line hit the mesh?
+    /// Does the half-line hit the mesh? (Stops at the first hit.)
     fn hits(&self, o: &Vector3<T>, r: &Vector3<T>, culling: Culling) -> bool {
-        let mut hit = false;
-        self.for_each_near(o, r, T::zero(), culling, |t| {
-            hit = hit || ray_triangle(o, r, &self.tri(t)).is_some();
-        });
-        hit
+        let pierces = |t: u32| ray_triangle(o, r, &self.tri(t)).is_some();
+        match culling {
+            Culling::Dense => (0..self.triangles.len() as u32).any(pierces),
+            Culling::Bvh => self.bvh.any_near_ray(o, &inverse_dir(r), T::zero(), |t| {
+                // A triangle whose bounding sphere misses the half-line is not pierced.
+                let (c, rho) = self.spheres[t as usize];
+                let s = (c - o).dot(r).max(T::zero());
+                (o + r * s - c).norm_squared() <= rho * rho && pierces(t)
+            }),
+        }
     }
 
     /// [`Aggregation::Silhouette`] for one ray: `(x, what sets it, triangles visited)`.
