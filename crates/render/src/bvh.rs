@@ -134,6 +134,31 @@ impl<T: Real> Bvh<T> {
         radius: T,
         mut test: impl FnMut(u32) -> bool,
     ) -> bool {
+        self.walk(o, inv_r, radius, |t| (!test(t)).then_some(radius))
+    }
+
+    /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
+    /// larger): a nearest-element search prunes the boxes beyond its best distance so far.
+    pub fn for_each_near_ray_shrinking(
+        &self,
+        o: &Vector3<T>,
+        inv_r: &Vector3<T>,
+        radius: T,
+        mut visit: impl FnMut(u32) -> T,
+    ) {
+        self.walk(o, inv_r, radius, |t| Some(visit(t)));
+    }
+
+    /// The traversal both queries share: `visit` returns the radius from then on, or `None`
+    /// to stop (then `true` is returned).
+    #[inline]
+    fn walk(
+        &self,
+        o: &Vector3<T>,
+        inv_r: &Vector3<T>,
+        mut radius: T,
+        mut visit: impl FnMut(u32) -> Option<T>,
+    ) -> bool {
         if self.nodes.is_empty() {
             return false;
         }
@@ -151,11 +176,11 @@ impl<T: Real> Bvh<T> {
                 continue;
             }
             if n.count > 0 {
-                if self.order[n.first as usize..(n.first + n.count) as usize]
-                    .iter()
-                    .any(|&t| test(t))
-                {
-                    return true;
+                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
+                    match visit(t) {
+                        Some(r) => radius = r.min(radius),
+                        None => return true,
+                    }
                 }
             } else {
                 debug_assert!(top + 2 <= STACK);
@@ -165,44 +190,6 @@ impl<T: Real> Bvh<T> {
             }
         }
         false
-    }
-
-    /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
-    /// larger): a nearest-element search prunes the boxes beyond its best distance so far.
-    pub fn for_each_near_ray_shrinking(
-        &self,
-        o: &Vector3<T>,
-        inv_r: &Vector3<T>,
-        mut radius: T,
-        mut visit: impl FnMut(u32) -> T,
-    ) {
-        if self.nodes.is_empty() {
-            return;
-        }
-        let mut stack = [0u32; STACK];
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            let n = &self.nodes[stack[top] as usize];
-            if !slab_hit(
-                &(n.lo.add_scalar(-radius)),
-                &(n.hi.add_scalar(radius)),
-                o,
-                inv_r,
-            ) {
-                continue;
-            }
-            if n.count > 0 {
-                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
-                    radius = visit(t).min(radius);
-                }
-            } else {
-                debug_assert!(top + 2 <= STACK);
-                stack[top] = n.right;
-                stack[top + 1] = n.first;
-                top += 2;
-            }
-        }
     }
 }
 
