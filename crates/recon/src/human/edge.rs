@@ -69,10 +69,11 @@ const FAR_REL: f64 = 1e-3;
 ///
 /// `O(band + m)` per draw rather than `O(n)`: rays far from the edge (`α exp(−e/τ)` below
 /// [`FAR_REL`] × `(1 − α)`, or below 1e-9 when `α` is near 1) all weigh `1 − α` to within that
-/// relative error (a 0.1 % weight is invisible in a draw of thousands; the band is 2–5× smaller
-/// than at 1e-9), so their keys are treated as i.i.d.; the largest of them are generated in decreasing order as order statistics of uniforms
-/// (`U₍₁₎ = V₁^{1/n}`, `U₍ₖ₊₁₎ = U₍ₖ₎ V^{1/(n−k)}`) and given to a uniform random subset of
-/// them, while the band near the edge gets explicit keys. A 640×512 capture has up to 300,000
+/// relative error (a 0.1 % weight is invisible in a draw of thousands; the band is 2–5×
+/// smaller than at 1e-9), so their keys are treated as i.i.d.; the largest of them are
+/// generated in decreasing order as order statistics of uniforms (`U₍₁₎ = V₁^{1/n}`,
+/// `U₍ₖ₊₁₎ = U₍ₖ₎ V^{1/(n−k)}`) and given to a uniform random subset of them, while the band
+/// near the edge gets explicit keys. A 640×512 capture has up to 300,000
 /// object rays; the plain draw over all of them was a third of stage 2's time.
 pub struct EdgeSampler {
     /// Ray indices sorted by edge distance, ascending.
