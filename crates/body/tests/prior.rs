@@ -195,11 +195,16 @@ fn a_short_training_run_lowers_the_loss() {
 }
 
 /// A run with real poses records them (count and provenance) and still measures the
-/// benchmark's persons.
+/// benchmark's persons. (Three template poses stand in for a real set: the benchmark's own
+/// persons are refused, see below.)
 #[test]
 fn training_draws_the_real_share_from_a_pose_set() {
+    let generator = PoseGenerator::new(model());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
     let real = irmirror_body::mocap::MocapSet {
-        poses: irmirror_body::mocap::MocapSet::builtin().unwrap().poses[..3].to_vec(),
+        poses: ["stand", "walk", "sit"]
+            .map(|t| generator.template(t, &mut rng).unwrap())
+            .to_vec(),
         sources: vec!["a:1".into(), "a:2".into(), "a:3".into()],
         provenance: "three poses".into(),
     };
@@ -216,4 +221,40 @@ fn training_draws_the_real_share_from_a_pose_set() {
     assert_eq!(report.real_poses, 3);
     assert_eq!(report.real_provenance, "three poses");
     assert!(report.benchmark_aligned_vertex_error_median_m.is_finite());
+}
+
+/// Training refuses, before any step, a real-pose set it cannot use — empty, posing another
+/// skeleton, or holding the benchmark's persons (its held-out truth) — with the reason; the
+/// library checks it, so every caller (not only the CLI) is held to it.
+#[test]
+fn training_refuses_unusable_real_poses() {
+    use irmirror_body::mocap::MocapSet;
+    let model = model();
+    let set = |poses: Vec<Vec<[f64; 3]>>| MocapSet {
+        sources: vec!["test".into(); poses.len()],
+        poses,
+        provenance: "test".into(),
+    };
+    let bench = MocapSet::builtin().unwrap();
+    let cfg = TrainConfig {
+        real_fraction: 0.25,
+        ..TrainConfig::default()
+    };
+    for (real, why) in [
+        (set(vec![]), "no poses".to_string()),
+        (
+            set(vec![vec![[0.0; 3]; 5]]),
+            format!("poses of 5 bones, the body has {}", model.n_joints()),
+        ),
+        (
+            set(bench.poses[..3].to_vec()),
+            "3 of its poses are the benchmark's persons".to_string(),
+        ),
+    ] {
+        let err = train(model, &cfg, Some(&real), |_, _| {})
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(err.contains(&why), "{err}");
+    }
 }

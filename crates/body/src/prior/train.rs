@@ -146,14 +146,52 @@ pub fn round_trip_errors(
         .collect()
 }
 
+/// Refuses a real-pose set training cannot use: empty, posing another skeleton, or holding any
+/// of the benchmark's persons ([`MocapSet::builtin`], its held-out truth: a prior trained on
+/// them would know the answers).
+fn check_real_poses(model: &BodyModel, set: &MocapSet, bench: &MocapSet) -> Result<(), PriorError> {
+    let bad = |why: String| Err(PriorError::RealPoses(why));
+    if set.poses.is_empty() {
+        return bad("no poses".into());
+    }
+    if let Some(p) = set.poses.iter().find(|p| p.len() != model.n_joints()) {
+        return bad(format!(
+            "poses of {} bones, the body has {}",
+            p.len(),
+            model.n_joints()
+        ));
+    }
+    let same = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| x.iter().zip(y).all(|(u, v)| (u - v).abs() < 1e-6))
+    };
+    let shared = set
+        .poses
+        .iter()
+        .filter(|p| bench.poses.iter().any(|b| same(b, p)))
+        .count();
+    if shared > 0 {
+        return bad(format!(
+            "{shared} of its poses are the benchmark's persons (assets/poses/mocap_bvhtools.safetensors); the prior must not train on the benchmark's truth"
+        ));
+    }
+    Ok(())
+}
+
 /// Trains a prior on procedural poses and, when `real` is given, a `cfg.real_fraction` share of
-/// its poses; `progress(step, loss)` is called every 50 steps.
+/// its poses (refused when empty, of another skeleton, or holding the benchmark's persons);
+/// `progress(step, loss)` is called every 50 steps.
 pub fn train(
     model: &BodyModel,
     cfg: &TrainConfig,
     real: Option<&MocapSet>,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<(PoseVae, TrainReport), PriorError> {
+    let bench = MocapSet::builtin()?;
+    if let Some(set) = real {
+        check_real_poses(model, set, &bench)?;
+    }
     let poses_gen = PoseGenerator::new(model);
     let mut data_rng = irmirror_geom::rng::seeded(cfg.seed, 1);
     let real_poses = real.map_or(&[][..], |r| &r.poses[..]);
@@ -269,7 +307,6 @@ pub fn train(
         .filter(|p| pen.penetrates(p))
         .count() as f64
         / poses.len().min(20_000) as f64;
-    let bench = MocapSet::builtin()?;
     let trips = round_trip_errors(model, &prior, &bench.poses)?;
     let quantile = |q: f64, pick: fn(&(f64, f64, f64)) -> f64| {
         let mut v: Vec<f64> = trips.iter().map(pick).collect();

@@ -32,6 +32,9 @@ pub enum PriorError {
     /// The body model or a pose set failed (the training figures pose the body).
     #[error("pose prior: {0}")]
     Body(#[from] crate::BodyError),
+    /// The real poses given to training cannot be trained on.
+    #[error("real poses: {0}")]
+    RealPoses(String),
     /// The weights file is not a pose prior.
     #[error("pose prior weights {path}: {reason}")]
     Weights {

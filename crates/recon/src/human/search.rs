@@ -103,6 +103,11 @@ fn distinct(a: &HumanState, b: &HumanState) -> bool {
     far || turned
 }
 
+/// Two root rotations facing more than 135° apart: a front/back pair.
+fn front_back(up: &Vector3<f64>, a: &Matrix3<f64>, b: &Matrix3<f64>) -> bool {
+    facing_angle_deg(&up.normalize(), a, b) > 135.0
+}
+
 /// Angle between two root rotations' facing (Anny's −Y) about `up`, degrees.
 pub fn facing_angle_deg(up: &Vector3<f64>, a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
     let flat = |r: &Matrix3<f64>| {
@@ -500,11 +505,11 @@ fn polish_rise(
         let n = rc.polish_best.min(order.len());
         let mut chosen: Vec<usize> = order[..n].iter().map(|o| o.0).collect();
         if let Some(&(best, _)) = order.first() {
-            let up = problem.up.normalize();
-            let rot = |i: usize| refined[i].as_ref().map(|r| r.state.rotation);
-            let partner = order[n..].iter().map(|o| o.0).find(|&i| {
-                matches!((rot(best), rot(i)), (Some(a), Some(b)) if facing_angle_deg(&up, &a, &b) > 135.0)
-            });
+            let rot = |i: usize| &refined[i].as_ref().expect("live").state.rotation;
+            let partner = order[n..]
+                .iter()
+                .map(|o| o.0)
+                .find(|&i| front_back(&problem.up, rot(best), rot(i)));
             chosen.extend(partner);
         }
         chosen
@@ -627,11 +632,10 @@ pub fn fit_human(
     }
     let mut rest: Vec<_> = rest.collect();
     // The best one's front/back partner: what a binary silhouette cannot rule out.
-    let up = problem.up.normalize();
     if top_k > 1
         && let Some(i) = rest
             .iter()
-            .position(|(_, s)| facing_angle_deg(&up, &s.rotation, &kept[0].1.rotation) > 135.0)
+            .position(|(_, s)| front_back(&problem.up, &s.rotation, &kept[0].1.rotation))
     {
         kept.push(rest.remove(i));
     }
