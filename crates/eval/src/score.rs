@@ -83,7 +83,7 @@ impl Evaluation {
                     100.0 * self.root_error_m / self.person_distance_m.max(1e-9),
                     self.person_distance_m
                 ),
-                yardstick: "goal ≤ 0.10 m tabletop, ≤ 5 % car; benchmark median 0.21 m bowls, 0.28 m mugs, 0.49 m car, 0.23 m wide",
+                yardstick: "goal ≤ 0.10 m tabletop, ≤ 5 % car; benchmark median 0.14 m bowls, 0.16 m mugs, 0.15 m car, 0.23 m wide",
             },
             FigureRow {
                 name: "2-D keypoints, evaluation camera (normalised)",
@@ -108,7 +108,7 @@ impl Evaluation {
             FigureRow {
                 name: "mean per-vertex error",
                 value: opt(self.vertex_error_m, " m", 3),
-                yardstick: "goal ≤ 0.12 m; random pose at the true root and facing ≈ 0.26 m; benchmark median 0.32 bowls, 0.55 mugs, 0.55 car, 0.47 wide",
+                yardstick: "goal ≤ 0.12 m; random pose at the true root and facing ≈ 0.26 m; benchmark median 0.31 bowls, 0.53 mugs, 0.43 car, 0.45 wide",
             },
             FigureRow {
                 name: "facing error",

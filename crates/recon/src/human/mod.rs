@@ -17,7 +17,12 @@
 //! * **Edge sampling.** Each iteration draws `rays_per_iteration` rays without replacement with
 //!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
 //!   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the iterations (curriculum).
-//!   Ablated: uniform draws of the same count.
+//!   Ablated: uniform draws of the same count. With the mask's data term the draws are made
+//!   among the **active set** only (`active_margin_m`): the mask's rays and those passing within
+//!   that margin of the body, refreshed every `active_every` steps, at most `max_ray_fraction`
+//!   of them. The other rays have occupancy ≈ 0 and target 0 and add nothing to the soft IoU,
+//!   yet were 98 % of a draw on a car door (a 2,500-pixel reflection among 150,000 object
+//!   pixels: ≈ 50 mask rays per step).
 //! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
 //! * **Global search, then refinement** ([`search`]): candidates over the full circle of facing
 //!   directions × distances along the mask's reflected rays × pose-prior modes, scored cheaply
@@ -62,6 +67,12 @@ pub struct HumanConfig {
     pub rays_per_iteration: usize,
     /// Largest fraction of all rays drawn per step (edge sampling needs a choice to make).
     pub max_ray_fraction: f64,
+    /// Margin of the active set, m: with the mask's data term, each step draws only among the
+    /// mask's rays and those passing within this distance of the body (the others add
+    /// nothing to the soft IoU); 0 draws among all rays.
+    pub active_margin_m: f64,
+    /// Steps between refreshes of the active set.
+    pub active_every: usize,
     /// Edge sampling on/off (ablation switch).
     pub edge_sampling: bool,
     /// Final weight α of the edge term.
@@ -107,6 +118,23 @@ pub struct HumanConfig {
     pub radiometric: radiometric::RadiometricConfig,
 }
 
+impl HumanConfig {
+    /// The thermal polish's settings: `radiometric.polish_iterations` steps at the final blur,
+    /// the learning rates scaled by `radiometric.polish_lr_scale`.
+    pub fn polish(&self) -> HumanConfig {
+        let k = self.radiometric.polish_lr_scale;
+        HumanConfig {
+            iterations: self.radiometric.polish_iterations,
+            sigma_m2: [self.sigma_m2[1]; 2],
+            lr_translation: self.lr_translation * k,
+            lr_rotation: self.lr_rotation * k,
+            lr_height: self.lr_height * k,
+            lr_latent: self.lr_latent * k,
+            ..self.clone()
+        }
+    }
+}
+
 impl Default for HumanConfig {
     fn default() -> Self {
         Self {
@@ -114,6 +142,8 @@ impl Default for HumanConfig {
             iterations: 150,
             rays_per_iteration: 3000,
             max_ray_fraction: 0.5,
+            active_margin_m: 0.25,
+            active_every: 10,
             edge_sampling: true,
             edge_mix: 0.9,
             edge_tau_px: [6.0, 1.5],

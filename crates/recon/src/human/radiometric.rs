@@ -85,6 +85,9 @@ pub struct RadiometricConfig {
     /// the best one's front/back partner (the pair the rise is there to tell apart); the others
     /// are ranked on the rise as they stand. 0: every hypothesis.
     pub polish_best: usize,
+    /// The polish's learning rates as a share of the refinement's (it starts from a converged
+    /// state: full rates kick it out of its basin in the first steps).
+    pub polish_lr_scale: f64,
     /// Integrate each pixel's footprint (4 rays through the pixel's box, their mean convolved
     /// with the capture's point spread; [`crate::pipeline::FOOTPRINT_OFFSETS`]) rather than
     /// one ray at its centre, when the reflection mask has at most this many pixels (0: never).
@@ -105,6 +108,7 @@ impl Default for RadiometricConfig {
             huber_sigmas: 3.0,
             polish_iterations: 40,
             polish_best: 1,
+            polish_lr_scale: 0.25,
             footprint_max_mask_px: 1000,
         }
     }

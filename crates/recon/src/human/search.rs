@@ -20,7 +20,8 @@
 //!    radiometric term on ([`super::radiometric`]) and `polish_iterations` > 0 (default 40) the
 //!    rounds and the refinement fit the mask too, the best `polish_best` refined hypotheses by
 //!    the rise (default 1; 0: all) and the best one's front/back partner then take that many
-//!    steps on the thermal rise, and the final ranking is on the rise — where front and back
+//!    steps on the thermal rise (at `polish_lr_scale` of the learning rates: they start
+//!    converged), and the final ranking is on the rise — where front and back
 //!    differ; with 0 the rounds and the refinement fit the rise throughout.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
 //!    (root > 25 cm or facing > 45° apart, as reported hypotheses), and the front/back flip of
@@ -514,11 +515,7 @@ fn polish_rise(
         }
         chosen
     };
-    let polish_cfg = HumanConfig {
-        iterations: rc.polish_iterations,
-        sigma_m2: [cfg.sigma_m2[1]; 2],
-        ..cfg.clone()
-    };
+    let polish_cfg = cfg.polish();
     let polished: Vec<_> = chosen
         .par_iter()
         .map(|&i| {
