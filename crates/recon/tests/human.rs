@@ -607,8 +607,9 @@ fn the_search_finds_a_person_facing_away() {
 /// The refinement's active set holds every ray that carries information: each mask ray, and
 /// each ray the body's soft occupancy reaches at the refinement's widest blur. What it leaves
 /// out has occupancy below 1e-6 and target 0 (so it adds nothing to the soft IoU's sums), and
-/// it is a small part of a car door's rays (car seed 1, Boson; the truth moved 30 cm and turned
-/// 30°, as a state mid-search).
+/// it is a small part of a car door's rays (car seed 1, Lepton-class: 15,866 rays; the truth
+/// moved 30 cm and turned 30°, as a state mid-search). Measured: 1,662 rays (10.5 %), 411 of
+/// them reached by the body.
 #[test]
 fn the_active_set_holds_every_ray_the_body_reaches() {
     use irmirror_recon::human::*;
