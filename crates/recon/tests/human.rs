@@ -667,3 +667,33 @@ fn the_active_set_holds_every_ray_the_body_reaches() {
     assert!(reached > 100, "the body reaches {reached} rays");
     assert!(share < 0.2, "active share {share}");
 }
+
+/// Settings no fit can run with are refused with the field named, before any work: a negative
+/// polish rate share would turn the polish into an ascent, a zero blur divides by zero.
+#[test]
+fn impossible_stage2_settings_are_a_clear_error() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let (_, up) = true_root(&sc, &sim);
+    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let mut polish = HumanConfig::default();
+    polish.radiometric.polish_lr_scale = -1.0;
+    let margin = HumanConfig {
+        active_margin_m: f64::NAN,
+        ..HumanConfig::default()
+    };
+    let blur = HumanConfig {
+        sigma_m2: [3e-4, 0.0],
+        ..HumanConfig::default()
+    };
+    for (cfg, field) in [
+        (polish, "polish_lr_scale = -1"),
+        (margin, "active_margin_m = NaN"),
+        (blur, "sigma_m2 holds 0"),
+    ] {
+        let Err(err) = fit_human(&problem, &cfg, 0, &|_| {}) else {
+            panic!("{field}: not refused");
+        };
+        assert!(err.to_string().contains(field), "{err}");
+    }
+}

@@ -119,6 +119,36 @@ pub struct HumanConfig {
 }
 
 impl HumanConfig {
+    /// Refuses settings no fit can run with (a `--config` TOML is user input): a learning
+    /// rate, the active set's margin or the polish's rate share negative or not finite, a
+    /// blur not positive.
+    pub fn check(&self) -> Result<(), crate::ReconError> {
+        let at_least_zero = [
+            ("lr_translation", self.lr_translation),
+            ("lr_rotation", self.lr_rotation),
+            ("lr_height", self.lr_height),
+            ("lr_latent", self.lr_latent),
+            ("active_margin_m", self.active_margin_m),
+            (
+                "radiometric.polish_lr_scale",
+                self.radiometric.polish_lr_scale,
+            ),
+        ];
+        for (name, v) in at_least_zero {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(crate::ReconError::Config(format!(
+                    "[human] {name} = {v}: must be a finite number ≥ 0"
+                )));
+            }
+        }
+        if let Some(v) = self.sigma_m2.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+            return Err(crate::ReconError::Config(format!(
+                "[human] sigma_m2 holds {v}: the blur must be a finite number > 0 (m²)"
+            )));
+        }
+        Ok(())
+    }
+
     /// The thermal polish's settings: `radiometric.polish_iterations` steps at the final blur,
     /// the learning rates scaled by `radiometric.polish_lr_scale`.
     pub fn polish(&self) -> HumanConfig {

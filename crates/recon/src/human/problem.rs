@@ -469,18 +469,19 @@ impl HumanProblem<'_> {
     ) -> Result<(), ReconError> {
         let body = super::posed_body(self.model, self.prior, st)?;
         let bvh = irmirror_render::bvh::Bvh::build(&body.vertices, &self.model.asset.faces);
-        let near: Vec<bool> = (0..self.rays.len())
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|i| {
-                self.mask.data[self.rays.pixel[i] as usize] || {
-                    let inv = irmirror_render::bvh::inverse_dir(&self.rays.dir[i]);
-                    bvh.any_near_ray(&self.rays.origin[i], &inv, margin, |_| true)
-                }
-            })
-            .collect();
         out.clear();
-        out.extend((0..near.len()).filter(|&i| near[i]));
+        // Rayon's collect keeps the order: ascending.
+        out.par_extend(
+            (0..self.rays.len())
+                .into_par_iter()
+                .with_min_len(4096)
+                .filter(|&i| {
+                    self.mask.data[self.rays.pixel[i] as usize] || {
+                        let inv = irmirror_render::bvh::inverse_dir(&self.rays.dir[i]);
+                        bvh.any_near_ray(&self.rays.origin[i], &inv, margin, |_| true)
+                    }
+                }),
+        );
         Ok(())
     }
 
@@ -510,8 +511,18 @@ impl HumanProblem<'_> {
         let rad = self.radiometric(cfg);
         let units = rad.map_or(self.rays.len(), |r| r.pixels());
         let unit_pixel = |u: usize| rad.map_or(self.rays.pixel[u], |r| r.pixel[u]);
-        // Edge draws: the sampler and every ray's target (a fixed batch brings its own).
+        // The active set (mask mode): the mask's rays and those passing within
+        // `active_margin_m` of the body, refreshed every `active_every` steps. A ray outside
+        // both has occupancy ≈ 0 and target 0, so it adds nothing to the soft IoU's sums nor
+        // to its gradient: drawing from the active set alone is the same estimator with more
+        // of the rays that carry information (on a car door 2 % of a uniform draw meets the
+        // mask).
+        let active_on = rad.is_none() && cfg.active_margin_m > 0.0;
+        let mut active: Vec<usize> = Vec::new();
+        // Edge draws: the sampler (over every unit, or over the active set from its first
+        // refresh on) and every ray's target (a fixed batch brings its own).
         let mut edge = match draw {
+            Draw::Edge(_) if active_on => Some((EdgeSampler::new(&[]), self.targets())),
             Draw::Edge(edge_dist) => Some((
                 EdgeSampler::new(
                     &(0..units)
@@ -533,19 +544,6 @@ impl HumanProblem<'_> {
             .div_ceil(self.rays.len().max(1))
             .min((units as f64 * cfg.max_ray_fraction).ceil() as usize)
             .max(1);
-        // The active set (mask mode): the mask's rays and those passing within
-        // `active_margin_m` of the body, refreshed every `active_every` steps. A ray outside
-        // both has occupancy ≈ 0 and target 0, so it adds nothing to the soft IoU's sums nor
-        // to its gradient: drawing from the active set alone is the same estimator with more
-        // of the rays that carry information (on a car door 2 % of a uniform draw meets the
-        // mask).
-        let edge_image = match draw {
-            Draw::Edge(e) => Some(e),
-            Draw::Fixed(_) => None,
-        };
-        let active_on = rad.is_none() && cfg.active_margin_m > 0.0;
-        let mut active: Vec<usize> = Vec::new();
-        let mut active_sampler = EdgeSampler::new(&[]);
         let iters = cfg.iterations.max(1);
         for it in 0..iters {
             let progress = it as f64 / (iters - 1).max(1) as f64;
@@ -555,7 +553,7 @@ impl HumanProblem<'_> {
                     sigma_m2: sigma,
                     ..fixed
                 },
-                Draw::Edge(_) => {
+                Draw::Edge(edge_dist) => {
                     // Draw the rays (weighted sampling without replacement, `EdgeSampler`).
                     let (alpha, tau) = if cfg.edge_sampling {
                         (
@@ -566,32 +564,31 @@ impl HumanProblem<'_> {
                     } else {
                         (0.0, 1.0)
                     };
-                    if let (Some(edge_dist), true) = (edge_image, active_on) {
-                        if it % cfg.active_every.max(1) == 0 {
-                            let now = HumanState {
-                                rotation: axis_angle_to_matrix(&omega) * base,
-                                ..st.clone()
-                            };
-                            self.active_rays(&now, cfg.active_margin_m, &mut active)?;
-                            let e: Vec<f64> = active
-                                .iter()
-                                .map(|&i| edge_dist.data[self.rays.pixel[i] as usize])
-                                .collect();
-                            active_sampler = EdgeSampler::new(&e);
-                        }
-                        let m_active = m
-                            .min((active.len() as f64 * cfg.max_ray_fraction).ceil() as usize)
-                            .max(1);
-                        active_sampler.draw(alpha, tau, m_active, &mut rng, &mut drawn);
-                        idx.clear();
-                        idx.extend(drawn.iter().map(|&k| active[k]));
-                        idx.sort_unstable();
-                        if let Some((_, target_all)) = edge.as_ref() {
-                            target.clear();
-                            target.extend(idx.iter().map(|&i| target_all[i]));
-                        }
-                    } else if let Some((sampler, target_all)) = edge.as_mut() {
+                    if let Some((sampler, target_all)) = edge.as_mut() {
                         match rad {
+                            None if active_on => {
+                                if it % cfg.active_every.max(1) == 0 {
+                                    let now = HumanState {
+                                        rotation: axis_angle_to_matrix(&omega) * base,
+                                        ..st.clone()
+                                    };
+                                    self.active_rays(&now, cfg.active_margin_m, &mut active)?;
+                                    *sampler = EdgeSampler::new(
+                                        &active
+                                            .iter()
+                                            .map(|&i| edge_dist.data[self.rays.pixel[i] as usize])
+                                            .collect::<Vec<f64>>(),
+                                    );
+                                }
+                                let m_active = m
+                                    .min((active.len() as f64 * cfg.max_ray_fraction).ceil()
+                                        as usize)
+                                    .max(1);
+                                sampler.draw(alpha, tau, m_active, &mut rng, &mut drawn);
+                                idx.clear();
+                                idx.extend(drawn.iter().map(|&k| active[k]));
+                                idx.sort_unstable();
+                            }
                             Some(r) => {
                                 sampler.draw(alpha, tau, m, &mut rng, &mut drawn);
                                 r.select(&drawn, &mut selection);

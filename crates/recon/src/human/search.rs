@@ -551,6 +551,7 @@ pub fn fit_human(
     seed: u64,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
+    cfg.check()?;
     let s = &cfg.search;
     let candidates = s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len();
     // With a polish, the search and refinement fit the mask and the thermal rise comes last.
