@@ -117,12 +117,54 @@ impl<T: Real> Bvh<T> {
         o: &Vector3<T>,
         inv_r: &Vector3<T>,
         radius: T,
+        visit: impl FnMut(u32),
+    ) {
+        self.for_each_near_ray_pruned(o, inv_r, radius, |_| false, visit);
+    }
+
+    /// As [`Self::for_each_near_ray`], but skips every subtree whose node `skip(node)` rejects
+    /// (node indices as [`Self::refit_node_boxes`] orders them): a query that knows, from a
+    /// per-node summary, that nothing below can matter.
+    pub fn for_each_near_ray_pruned(
+        &self,
+        o: &Vector3<T>,
+        inv_r: &Vector3<T>,
+        radius: T,
+        skip: impl Fn(usize) -> bool,
         mut visit: impl FnMut(u32),
     ) {
-        self.for_each_near_ray_shrinking(o, inv_r, radius, |t| {
+        self.walk(o, inv_r, radius, skip, |t| {
             visit(t);
-            radius
+            Some(radius)
         });
+    }
+
+    /// Per node, the union of its triangles' boxes `leaf_box(triangle) = (lo, hi)` in any space
+    /// (not only positions: the renderer bounds face normals with it), written into `boxes`
+    /// (one per node, reused). O(nodes), bottom-up like [`Self::refit`].
+    pub fn refit_node_boxes(
+        &self,
+        boxes: &mut Vec<(Vector3<T>, Vector3<T>)>,
+        leaf_box: impl Fn(u32) -> (Vector3<T>, Vector3<T>),
+    ) {
+        boxes.clear();
+        boxes.resize(self.nodes.len(), (Vector3::zeros(), Vector3::zeros()));
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            boxes[i] = if n.count > 0 {
+                let mut lo = Vector3::repeat(T::max_value().unwrap_or(T::one()));
+                let mut hi = -lo;
+                for &t in &self.order[n.first as usize..(n.first + n.count) as usize] {
+                    let (l, h) = leaf_box(t);
+                    lo = lo.inf(&l);
+                    hi = hi.sup(&h);
+                }
+                (lo, hi)
+            } else {
+                let (l, r) = (boxes[n.first as usize], boxes[n.right as usize]);
+                (l.0.inf(&r.0), l.1.sup(&r.1))
+            };
+        }
     }
 
     /// Whether `test(triangle)` holds for any triangle whose box, inflated by `radius`, meets
@@ -134,7 +176,13 @@ impl<T: Real> Bvh<T> {
         radius: T,
         mut test: impl FnMut(u32) -> bool,
     ) -> bool {
-        self.walk(o, inv_r, radius, |t| (!test(t)).then_some(radius))
+        self.walk(
+            o,
+            inv_r,
+            radius,
+            |_| false,
+            |t| (!test(t)).then_some(radius),
+        )
     }
 
     /// As [`Self::for_each_near_ray`], but `visit` returns the radius from then on (never
@@ -146,17 +194,18 @@ impl<T: Real> Bvh<T> {
         radius: T,
         mut visit: impl FnMut(u32) -> T,
     ) {
-        self.walk(o, inv_r, radius, |t| Some(visit(t)));
+        self.walk(o, inv_r, radius, |_| false, |t| Some(visit(t)));
     }
 
-    /// The traversal both queries share: `visit` returns the radius from then on, or `None`
-    /// to stop (then `true` is returned).
+    /// The traversal every query shares: subtrees `skip` rejects are not entered; `visit`
+    /// returns the radius from then on, or `None` to stop (then `true` is returned).
     #[inline]
     fn walk(
         &self,
         o: &Vector3<T>,
         inv_r: &Vector3<T>,
         mut radius: T,
+        skip: impl Fn(usize) -> bool,
         mut visit: impl FnMut(u32) -> Option<T>,
     ) -> bool {
         if self.nodes.is_empty() {
@@ -172,7 +221,8 @@ impl<T: Real> Bvh<T> {
                 &(n.hi.add_scalar(radius)),
                 o,
                 inv_r,
-            ) {
+            ) || skip(stack[top] as usize)
+            {
                 continue;
             }
             if n.count > 0 {

@@ -31,7 +31,11 @@
 //! saturates inside; its gradient reaches the one triangle or edge that sets `d`. A miss's
 //! nearest triangle is found by a BVH search whose radius shrinks to the best distance so far;
 //! a hit tests at most `MAX_EXPOSURE_TESTS` contour edges, nearest first, and counts as
-//! saturated beyond them (deep inside, every nearby contour is hidden).
+//! saturated beyond them (deep inside, every nearby contour is hidden). A hit's search for
+//! contour edges skips every BVH subtree whose faces and their edge neighbours all face one
+//! way along the ray (a box per node bounds their unit normals, refitted with the BVH): on a
+//! body most of what a ray passes near is such a patch (on the demo capture 338 → 92
+//! triangles visited per hitting ray, identical output).
 //!
 //! **Autodiff.** These gradients are hand-written; an autodiff graph (the pose prior's decoder)
 //! takes them through the surrogate `L̃ = Σ V ⊙ stop_grad(∂L/∂V)`, whose gradient w.r.t. the
@@ -135,12 +139,20 @@ pub struct SoftRenderer<T: Real> {
     spheres: Vec<(Vector3<T>, T)>,
     /// Per ray-chunk sparse vertex-gradient contributions, reused across calls.
     contributions: Vec<Vec<(u32, Vector3<T>)>>,
-    /// Face normals, not normalised (only their signs against a ray matter: contour edges).
+    /// Unit face normals (0 for a degenerate face); only their signs against a ray matter
+    /// (contour edges).
     normals: Vec<Vector3<T>>,
     /// Mesh edges: vertices and the (up to two) faces that share them.
     edges: Vec<Edge>,
     /// Per triangle: its three edges (`edges` indices), edge k from vertex k to k + 1.
     tri_edges: Vec<[u32; 3]>,
+    /// Per triangle: the box bounding its normal and those of its neighbours across the edges
+    /// it owns (below).
+    tri_normal_boxes: Vec<(Vector3<T>, Vector3<T>)>,
+    /// Per BVH node: a box bounding the unit normals of its triangles and of their neighbours
+    /// across the edges they own (the whole cube under a boundary edge). A hitting ray whose
+    /// direction has one sign against the whole box has no contour edge in that subtree.
+    normal_boxes: Vec<(Vector3<T>, Vector3<T>)>,
 }
 
 /// Exposure tests per hitting ray, nearest contour edges first (module docs).
@@ -205,6 +217,8 @@ impl<T: Real> SoftRenderer<T> {
             normals: vec![Vector3::zeros(); triangles.len()],
             edges: Vec::new(),
             tri_edges: Vec::with_capacity(triangles.len()),
+            tri_normal_boxes: vec![(Vector3::zeros(), Vector3::zeros()); triangles.len()],
+            normal_boxes: Vec::new(),
         };
         let mut index = std::collections::HashMap::with_capacity(triangles.len() * 3 / 2);
         for (f, tri) in triangles.iter().enumerate() {
@@ -251,8 +265,54 @@ impl<T: Real> SoftRenderer<T> {
                     .max((b - m).norm_squared())
                     .max((c - m).norm_squared());
                 *s = (m, r2.sqrt());
-                *n = (b - a).cross(&(c - a));
+                // Unit length so that the normal boxes below are tight; a degenerate face keeps
+                // 0, which makes every box holding it unprunable (n·r = 0 counts as contour).
+                let n_raw = (b - a).cross(&(c - a));
+                let len = n_raw.norm();
+                *n = if len > T::zero() { n_raw / len } else { n_raw };
             });
+        let (normals, edges, tri_edges) = (&self.normals, &self.edges, &self.tri_edges);
+        self.tri_normal_boxes
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(t, bx)| {
+                let n = normals[t];
+                let (mut lo, mut hi) = (n, n);
+                for &e in &tri_edges[t] {
+                    let edge = edges[e as usize];
+                    if edge.f[0] != t as u32 {
+                        continue;
+                    }
+                    if edge.f[1] == NO_FACE {
+                        (lo, hi) = (Vector3::repeat(-T::one()), Vector3::repeat(T::one()));
+                        break;
+                    }
+                    let m = normals[edge.f[1] as usize];
+                    lo = lo.inf(&m);
+                    hi = hi.sup(&m);
+                }
+                *bx = (lo, hi);
+            });
+        let tri_boxes = &self.tri_normal_boxes;
+        self.bvh
+            .refit_node_boxes(&mut self.normal_boxes, |t| tri_boxes[t as usize]);
+    }
+
+    /// Whether no contour edge (as [`Self::silhouette_ray`] classifies them along `r`) is owned
+    /// by a triangle below BVH node `node`: every normal in its box has one strict sign against
+    /// `r` (the box bounds the very normals the classification uses; a margin of a few ulps
+    /// covers a different summation order in its dot products).
+    #[inline]
+    fn contour_free(&self, node: usize, r: &Vector3<T>) -> bool {
+        let (lo, hi) = &self.normal_boxes[node];
+        let (mut min, mut max) = (T::zero(), T::zero());
+        for k in 0..3 {
+            let (a, b) = (lo[k] * r[k], hi[k] * r[k]);
+            min += a.min(b);
+            max += a.max(b);
+        }
+        let margin = T::eps() * T::of(8.0);
+        min > margin || max < -margin
     }
 
     /// The vertices, depth frame.
@@ -275,28 +335,32 @@ impl<T: Real> SoftRenderer<T> {
     }
 
     /// Visits the triangles that may lie within `radius` of the half-line (every one for
-    /// [`Culling::Dense`]); pierced triangles are always visited.
+    /// [`Culling::Dense`]); pierced triangles are always visited. [`Culling::Bvh`] skips the
+    /// subtrees `skip(node)` rejects.
     #[inline]
     fn for_each_near(
         &self,
-        o: &Vector3<T>,
-        r: &Vector3<T>,
+        (o, r): (&Vector3<T>, &Vector3<T>),
         radius: T,
         culling: Culling,
+        skip: impl Fn(usize) -> bool,
         mut visit: impl FnMut(u32),
     ) {
         match culling {
             Culling::Dense => (0..self.triangles.len() as u32).for_each(visit),
-            Culling::Bvh => self.bvh.for_each_near_ray(o, &inverse_dir(r), radius, |t| {
-                // A triangle whose bounding sphere is farther than the radius is neither
-                // pierced nor influential.
-                let (c, rho) = self.spheres[t as usize];
-                let s = (c - o).dot(r).max(T::zero());
-                let reach = radius + rho;
-                if (o + r * s - c).norm_squared() <= reach * reach {
-                    visit(t);
-                }
-            }),
+            Culling::Bvh => {
+                self.bvh
+                    .for_each_near_ray_pruned(o, &inverse_dir(r), radius, skip, |t| {
+                        // A triangle whose bounding sphere is farther than the radius is neither
+                        // pierced nor influential.
+                        let (c, rho) = self.spheres[t as usize];
+                        let s = (c - o).dot(r).max(T::zero());
+                        let reach = radius + rho;
+                        if (o + r * s - c).norm_squared() <= reach * reach {
+                            visit(t);
+                        }
+                    })
+            }
         }
     }
 
@@ -315,18 +379,24 @@ impl<T: Real> SoftRenderer<T> {
             Culling::Dense => T::max_value().unwrap_or(T::one()),
             Culling::Bvh => T::of(p.cull_d2()),
         };
-        self.for_each_near(o, r, T::of(p.cull_d2()).sqrt(), culling, |t| {
-            let tri = self.tri(t);
-            let pd = ray_triangle_distance(o, r, &tri);
-            if pd.pierced || pd.d2 <= cull {
-                let x = if pd.pierced {
-                    pd.d2 * inv_sigma
-                } else {
-                    -pd.d2 * inv_sigma
-                };
-                f(t, &tri, &pd, x);
-            }
-        });
+        self.for_each_near(
+            (o, r),
+            T::of(p.cull_d2()).sqrt(),
+            culling,
+            |_| false,
+            |t| {
+                let tri = self.tri(t);
+                let pd = ray_triangle_distance(o, r, &tri);
+                if pd.pierced || pd.d2 <= cull {
+                    let x = if pd.pierced {
+                        pd.d2 * inv_sigma
+                    } else {
+                        -pd.d2 * inv_sigma
+                    };
+                    f(t, &tri, &pd, x);
+                }
+            },
+        );
     }
 
     /// Does the half-line hit the mesh? (Stops at the first hit.)
@@ -393,7 +463,10 @@ impl<T: Real> SoftRenderer<T> {
         }
         // Contour edges near the ray, nearest first; the first exposed one is the silhouette.
         cand.clear();
-        self.for_each_near(o, r, cull.sqrt(), culling, |t| {
+        // Subtrees without a contour edge along `r` are skipped: on a closed body most of what
+        // a deep hitting ray passes near faces it (or away from it) throughout.
+        let skip = |node| self.contour_free(node, r);
+        self.for_each_near((o, r), cull.sqrt(), culling, skip, |t| {
             visited += 1;
             for &e in &self.tri_edges[t as usize] {
                 let edge = self.edges[e as usize];

@@ -463,6 +463,94 @@ fn hidden_contours_do_not_count() {
     assert!(occ.value.iter().any(|&v| v < 0.4) && occ.value.iter().any(|&v| v > 0.6 && v < 0.999));
 }
 
+/// The hitting rays' contour search skips BVH subtrees whose faces (and their neighbours) all
+/// face one way along the ray: on two overlapping closed spheres, bumped and then moved (so the
+/// normal boxes are refitted, not built), random rays in every direction get exactly the
+/// occupancy and the silhouette element that visiting every triangle gives, and the hitting
+/// rays visit a small fraction of the triangles within the cull radius (a deep one: none).
+#[test]
+fn contour_free_subtrees_are_skipped_without_changing_the_silhouette() {
+    let (mut verts, mut tris) = uv_sphere(V::new(0.0, 0.0, 1.0), 0.3, 24, 48);
+    let (v2, t2) = uv_sphere(V::new(0.05, 0.0, 0.75), 0.12, 16, 32);
+    let off = verts.len() as u32;
+    verts.extend(v2);
+    tris.extend(t2.iter().map(|t| t.map(|i| i + off)));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let built: Vec<V> = verts
+        .iter()
+        .map(|v| v + (v - V::new(0.0, 0.0, 1.0)) * rng.random_range(-0.01..0.01))
+        .collect();
+    let rot = axis_angle_to_matrix(&V::new(0.3, -0.5, 0.2));
+    let moved: Vec<V> = built
+        .iter()
+        .map(|v| rot * (v - V::new(0.0, 0.0, 1.0)) + V::new(0.02, -0.03, 1.05))
+        .collect();
+    let mut r = SoftRenderer::new(&built, &tris);
+    r.set_vertices(&moved);
+    let mut rays = parallel_rays(&[]);
+    for p in 0..400u32 {
+        let d = V::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        )
+        .normalize();
+        let aim = V::new(0.02, -0.03, 1.05)
+            + V::new(
+                rng.random_range(-0.35..0.35),
+                rng.random_range(-0.35..0.35),
+                rng.random_range(-0.35..0.35),
+            );
+        rays.pixel.push(p);
+        rays.object.push(0);
+        rays.origin.push(aim - d * 2.0);
+        rays.dir.push(d);
+        rays.normal.push(V::z());
+    }
+    rays.width = 400;
+    let p = OccupancyParams {
+        sigma_m2: 3e-4,
+        epsilon: 1e-7,
+        aggregation: Aggregation::Silhouette,
+    };
+    let pruned = r.forward(&rays, &p, Culling::Bvh);
+    let dense = r.forward(&rays, &p, Culling::Dense);
+    assert_eq!(pruned.value, dense.value);
+    // The same distance to the same kind of element (equidistant ones may swap: a shared vertex).
+    let key = |n: &Option<irmirror_render::occupancy::Nearest<f64>>| {
+        n.map(|n| (n.pair.pierced, n.pair.d2))
+    };
+    for (a, b) in pruned.nearest.iter().zip(&dense.nearest) {
+        assert_eq!(key(a), key(b));
+    }
+    // Visits of the hitting rays against a plain query of the cull radius.
+    let hard = hard_mask(&rays, r.bvh(), r.vertices(), r.triangles());
+    let (mut visited, mut plain, mut hits, mut deep_zero) = (0u64, 0u64, 0, 0);
+    for i in 0..rays.len() {
+        if !hard[i] {
+            continue;
+        }
+        hits += 1;
+        visited += u64::from(pruned.pairs_per_ray[i]);
+        let mut n = 0u64;
+        r.bvh().for_each_near_ray(
+            &rays.origin[i],
+            &irmirror_render::bvh::inverse_dir(&rays.dir[i]),
+            p.cull_d2().sqrt(),
+            |_| n += 1,
+        );
+        plain += n;
+        if pruned.nearest[i].is_none() && pruned.pairs_per_ray[i] == 0 {
+            deep_zero += 1;
+        }
+    }
+    assert!(hits > 100, "{hits} hitting rays");
+    assert!(
+        (visited as f64) < 0.2 * plain as f64 && deep_zero > 10,
+        "{visited} triangles visited, {plain} within the cull radius, {deep_zero} of {hits} rays visited none"
+    );
+}
+
 #[test]
 fn rigid_motion_of_mesh_and_rays_leaves_occupancy_unchanged() {
     let (verts, tris, rays, _) = scene(4);

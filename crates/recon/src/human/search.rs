@@ -581,6 +581,7 @@ pub fn fit_human(
         })
         .collect::<Result<_, ReconError>>()?;
     if polish > 0 {
+        tracing::debug!("mask refinement: {:.2} s", t0.elapsed().as_secs_f64());
         polish_rise(problem, cfg, &edge_dist, seed, &mut refined)?;
     }
     tracing::debug!("refinement: {:.2} s", t0.elapsed().as_secs_f64());
