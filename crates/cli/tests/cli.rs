@@ -511,6 +511,83 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
     assert!(!o.status.success() && stderr(&o).contains(".safetensors"));
 }
 
+/// `eval --basin`: four starts per capture, offset and turned as asked, reported per start and
+/// in the table; with a two-step refinement the ends stay about the offset away from the truth
+/// (the starts sit on the objects→person line, not at the truth). Bad values: a clear error.
+#[test]
+fn eval_probes_the_refinement_basin() {
+    let dir = tmp("eval-basin");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("cheap.toml");
+    std::fs::write(
+        &cfg,
+        "[human]\ninits = 2\niterations = 2\n[human.search]\nyaw_bins = 2\ndistances = 1\npose_modes = [\"stand\"]\nkeep_scored = 2\nrounds = 1\nfirst_steps = 1\n[human.radiometric]\npolish_iterations = 2\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let o = irmirror(&[
+        "eval",
+        "--cell",
+        "tabletop-wide",
+        "--limit",
+        "1",
+        "--full-only",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--basin",
+        "0.2,20",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let basin = results["captures"][0]["diagnosis"]["basin"]
+        .as_array()
+        .unwrap();
+    assert_eq!(basin.len(), 4);
+    let mut signs = Vec::new();
+    for b in basin {
+        let (d, a) = (
+            b["offset_m"].as_f64().unwrap(),
+            b["turn_deg"].as_f64().unwrap(),
+        );
+        assert!(
+            (d.abs() - 0.2).abs() < 1e-12 && (a.abs() - 20.0).abs() < 1e-12,
+            "{b}"
+        );
+        signs.push((d > 0.0, a > 0.0));
+        let root = b["root_error_m"].as_f64().unwrap();
+        assert!(
+            (root - 0.2).abs() < 0.1,
+            "two steps moved the root to {root} m: {b}"
+        );
+        assert!(b["data_loss"].as_f64().unwrap().is_finite());
+    }
+    signs.sort();
+    signs.dedup();
+    assert_eq!(signs.len(), 4, "every sign pair once: {basin:?}");
+    let table = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(
+        table.contains("| tabletop-wide | 1 | 4 (±0.20 m, ±20°) |"),
+        "{table}"
+    );
+    for (arg, needle) in [
+        ("--basin=0.3", "METRES,DEGREES"),
+        ("--basin=-1,30", "≥ 0"),
+        ("--basin=0.3,200", "[0, 180]"),
+    ] {
+        let bad = dir.join("bad");
+        let o = irmirror(&["eval", "--full-only", arg, "--out", bad.to_str().unwrap()]);
+        assert!(
+            !o.status.success() && stderr(&o).contains(needle),
+            "{arg}: {}",
+            stderr(&o)
+        );
+        assert!(!bad.exists());
+    }
+}
+
 #[test]
 fn eval_writes_table_results_and_report() {
     // One capture per cell, full model only (the whole quick set is the ignored test below).

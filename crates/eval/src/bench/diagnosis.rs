@@ -9,6 +9,7 @@ use irmirror_recon::objects::{FittedObject, Objects};
 use irmirror_recon::pipeline::{
     BodyPriors, ReconConfig, Reconstruction, human_problem, radiometry, reflected_rays,
 };
+use irmirror_render::ReflectedRays;
 use irmirror_sim::scene::ObjectShape;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -62,6 +63,15 @@ pub struct Diagnosis {
     /// the fitted objects means stage 1's mirror, not the optimiser or the observation, is off.
     #[serde(default)]
     pub truth_loss_true_objects: Option<f64>,
+    /// Stage 1's mirror where it matters: over the reflection mask's pixels, the median angle
+    /// between the reflected ray through the fitted objects and through the true ones, degrees
+    /// (`None` as for `truth_loss_true_objects`).
+    #[serde(default)]
+    pub mask_ray_angle_deg: Option<f64>,
+    /// The same rays' median distance apart where each passes the true root, m: how far the
+    /// fitted mirror moves what a mask pixel sees at the person.
+    #[serde(default)]
+    pub mask_ray_offset_m: Option<f64>,
     /// Every reported hypothesis' data term, best first.
     pub hypothesis_losses: Vec<f64>,
     /// Root error of every reported hypothesis, m.
@@ -105,6 +115,55 @@ pub struct Diagnosis {
     pub truth_mask_losses: Option<[f64; 2]>,
     /// The class.
     pub class: FailureClass,
+    /// The refinement's basin (`eval --basin`): the production refinement started near the
+    /// truth, one entry per start; empty when not probed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub basin: Vec<BasinStart>,
+}
+
+/// How far from the truth the basin probe starts the refinement (`eval --basin`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BasinProbe {
+    /// The root moved this far along the horizontal objects→person line (both ways), m.
+    pub offset_m: f64,
+    /// The body turned this far about the up axis (both ways), degrees.
+    pub turn_deg: f64,
+}
+
+impl Default for BasinProbe {
+    /// ±35 cm and ±35°: about the spacing of the search's grid (eight yaw bins are 45° apart),
+    /// so the starts sit where the search's nearest candidate to the truth can be.
+    fn default() -> Self {
+        Self {
+            offset_m: 0.35,
+            turn_deg: 35.0,
+        }
+    }
+}
+
+/// One start of the basin probe and where the refinement ended (`None`: it diverged).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BasinStart {
+    /// The start's root offset along the objects→person line, m (+: away from the objects).
+    pub offset_m: f64,
+    /// The start's turn about the up axis, degrees.
+    pub turn_deg: f64,
+    /// Root distance from the truth at the end, m.
+    pub root_error_m: Option<f64>,
+    /// Facing difference from the truth at the end (about the up axis), degrees.
+    pub facing_error_deg: Option<f64>,
+    /// The data term at the end (all rays, final σ).
+    pub data_loss: Option<f64>,
+}
+
+impl BasinStart {
+    /// Ended within [`SUCCESS_ROOT_M`] and [`SUCCESS_FACING_DEG`] of the truth.
+    pub fn closed(&self) -> bool {
+        self.root_error_m.is_some_and(|r| r <= SUCCESS_ROOT_M)
+            && self
+                .facing_error_deg
+                .is_some_and(|f| f <= SUCCESS_FACING_DEG)
+    }
 }
 
 impl Diagnosis {
@@ -133,6 +192,7 @@ pub(super) fn diagnose(
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
     (seed, cfg): (u64, &ReconConfig),
+    basin: Option<BasinProbe>,
 ) -> Result<Diagnosis, EvalError> {
     let BodyPriors { model, prior } = priors;
     let hcfg = cfg.human_settings();
@@ -168,7 +228,7 @@ pub(super) fn diagnose(
         problem.mesh_data_loss(&truth, &mask_cfg).0,
         problem.mesh_data_loss(&flipped, &mask_cfg).0,
     ]);
-    let truth_loss_true_objects = match true_objects(p, &rec.objects) {
+    let (truth_loss_true_objects, mirror) = match true_objects(p, &rec.objects) {
         Some(objects) => {
             let rays = reflected_rays(&p.capture, &objects, &rec.pre.mask, cfg);
             let (rad, _) = radiometry(&rec.pre, &rays, model, &hcfg)?;
@@ -177,10 +237,12 @@ pub(super) fn diagnose(
                 radiometry: rad.as_ref(),
                 ..problem
             };
-            Some(through_truth.mesh_data_loss(&truth, &hcfg).0)
+            let mirror = mirror_error(&rec.rays, &rays, &rec.pre.mask, &p.sim.body.joints[0]);
+            (Some(through_truth.mesh_data_loss(&truth, &hcfg).0), mirror)
         }
-        None => None,
+        None => (None, None),
     };
+    let (mask_ray_angle_deg, mask_ray_offset_m) = mirror.unzip();
     let hypothesis_losses: Vec<f64> = rec.human.hypotheses.iter().map(|h| h.data_loss).collect();
     let true_root = p.sim.body.joints[0];
     let bodies = rec
@@ -205,6 +267,10 @@ pub(super) fn diagnose(
     let (truth_start_loss, truth_start_root_error_m) =
         refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
+    let basin = match basin {
+        Some(b) => probe_basin(&truth_state, b, priors, rec, (seed, cfg))?,
+        None => Vec::new(),
+    };
     let at_truth = posed_body(model, prior, &truth_state)?;
     let model_truth_loss = Some(problem.mesh_data_loss(&at_truth.vertices, &hcfg).0);
     let model_truth_vertex_error_m = vertex_error(&at_truth.vertices, &p.sim.body.mesh.vertices);
@@ -217,6 +283,8 @@ pub(super) fn diagnose(
     Ok(Diagnosis {
         truth_loss,
         truth_loss_true_objects,
+        mask_ray_angle_deg,
+        mask_ray_offset_m,
         nearest_root_error_m: hypothesis_root_errors_m
             .iter()
             .copied()
@@ -232,7 +300,51 @@ pub(super) fn diagnose(
         truth_flip_loss,
         truth_mask_losses,
         class,
+        basin,
     })
+}
+
+/// Median over the mask's pixels seen through both ray sets (each pixel's first ray): the angle
+/// between the fitted and the true reflected ray (degrees), and how far apart they pass `root`
+/// (each ray's point nearest it, m). `None` when no mask pixel has both.
+fn mirror_error(
+    fitted: &ReflectedRays<f64>,
+    truth: &ReflectedRays<f64>,
+    mask: &irmirror_capture::Image<bool>,
+    root: &Vector3<f64>,
+) -> Option<(f64, f64)> {
+    let first = |r: &ReflectedRays<f64>| {
+        let mut m = std::collections::HashMap::with_capacity(r.len());
+        for i in 0..r.len() {
+            m.entry(r.pixel[i]).or_insert(i);
+        }
+        m
+    };
+    let (f, t) = (first(fitted), first(truth));
+    let near = |r: &ReflectedRays<f64>, i: usize| {
+        let (o, d) = (r.origin[i], r.dir[i]);
+        o + d * (root - o).dot(&d).max(0.0)
+    };
+    let (mut angle, mut offset): (Vec<f64>, Vec<f64>) = f
+        .iter()
+        .filter(|(px, _)| mask.data[**px as usize])
+        .filter_map(|(px, &i)| {
+            let j = *t.get(px)?;
+            let cos = fitted.dir[i].dot(&truth.dir[j]).clamp(-1.0, 1.0);
+            Some((
+                cos.acos().to_degrees(),
+                (near(fitted, i) - near(truth, j)).norm(),
+            ))
+        })
+        .unzip();
+    if angle.is_empty() {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Some((median(&mut angle), median(&mut offset)))
 }
 
 /// Stage 2's refinement started at the truth (as our model can state it): its data term and
@@ -260,6 +372,96 @@ fn refine_from_truth(
     };
     let data = problem.full_eval(&end, &hcfg)?.data;
     Ok(Some((data, (end.translation - true_root).norm())))
+}
+
+/// The refinement's basin: stage 2's refinement as `fit_human` runs it on each survivor of the
+/// search (the mask schedule, then the thermal polish when the capture has one), started from
+/// the truth as our model states it with the root moved ±`offset_m` along the horizontal
+/// objects→person line (where the size–distance ambiguity and the search's distance grid put
+/// the error) and turned ±`turn_deg` — four starts, paired signs both ways — from the search's
+/// "stand" template pose and the height prior's mean, as the search's candidates start. How
+/// many end within a success's distance of the truth separates "the search does not land near
+/// enough" from "the refinement cannot close the gap" in one run, with far less noise than root
+/// medians over a cell.
+fn probe_basin(
+    truth: &HumanState,
+    b: BasinProbe,
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+    (seed, cfg): (u64, &ReconConfig),
+) -> Result<Vec<BasinStart>, EvalError> {
+    use irmirror_recon::human::search::facing_angle_deg;
+    use rayon::prelude::*;
+    let hcfg = cfg.human_settings();
+    let (rad, _) = radiometry(&rec.pre, &rec.rays, priors.model, &hcfg)?;
+    let problem = human_problem(
+        priors,
+        &rec.rays,
+        &rec.pre.mask,
+        &rec.objects,
+        &hcfg,
+        rad.as_ref(),
+    );
+    let edge = edge_distance(&rec.pre.mask);
+    let up = problem.up.normalize();
+    let mut line = truth.translation - problem.objects_centre;
+    line -= up * up.dot(&line);
+    let line = line
+        .try_normalize(1e-9)
+        .unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
+    let generator = irmirror_body::prior::generator::PoseGenerator::new(priors.model);
+    let mut rng = irmirror_geom::rng::seeded(seed, 21);
+    let stand = generator.template("stand", &mut rng).ok_or_else(|| {
+        irmirror_recon::ReconError::Config("the pose generator has no \"stand\" template".into())
+    })?;
+    let latent = priors.prior.encode(&stand)?;
+    // As fit_human: the mask first when a polish follows, the polish on the thermal rise.
+    let thermal = problem.radiometric(&hcfg).is_some();
+    let polish = thermal && hcfg.radiometric.polish_iterations > 0;
+    let mut mask_cfg = hcfg.clone();
+    mask_cfg.radiometric.enabled = thermal && !polish;
+    let polish_cfg = hcfg.polish();
+    let (d, a) = (b.offset_m, b.turn_deg);
+    let starts = [(d, a), (-d, -a), (d, -a), (-d, a)];
+    starts
+        .par_iter()
+        .enumerate()
+        .map(|(k, &(offset_m, turn_deg))| {
+            let start = HumanState {
+                translation: truth.translation + line * offset_m,
+                rotation: irmirror_geom::rotation::axis_angle_to_matrix(
+                    &(up * turn_deg.to_radians()),
+                ) * truth.rotation,
+                height: hcfg.height_prior[0],
+                latent: latent.clone(),
+            };
+            let run_seed = seed.wrapping_add(k as u64);
+            let mut end = problem
+                .run(&start, &mask_cfg, Draw::Edge(&edge), run_seed)?
+                .map(|(st, _)| st);
+            if polish && let Some(mid) = end {
+                end = problem
+                    .run(&mid, &polish_cfg, Draw::Edge(&edge), run_seed)?
+                    .map(|(st, _)| st);
+            }
+            let Some(end) = end else {
+                return Ok(BasinStart {
+                    offset_m,
+                    turn_deg,
+                    root_error_m: None,
+                    facing_error_deg: None,
+                    data_loss: None,
+                });
+            };
+            Ok(BasinStart {
+                offset_m,
+                turn_deg,
+                root_error_m: Some((end.translation - truth.translation).norm()),
+                facing_error_deg: Some(facing_angle_deg(&up, &end.rotation, &truth.rotation)),
+                data_loss: Some(problem.full_eval(&end, &hcfg)?.data),
+            })
+        })
+        .collect()
 }
 
 /// The truth as stage 2's model states it: the true height slider, the pose prior's encoding of

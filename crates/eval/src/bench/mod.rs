@@ -11,9 +11,11 @@ mod diagnosis;
 mod run;
 mod table;
 
-pub use diagnosis::{Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M};
+pub use diagnosis::{
+    BasinProbe, BasinStart, Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M,
+};
 pub use run::run;
-pub use table::{diagnosis_table, hypotheses_table, markdown_table};
+pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
 
 use crate::EvalError;
 use crate::score::Evaluation;
@@ -227,6 +229,8 @@ pub struct Selection {
     pub config: irmirror_recon::pipeline::ReconConfig,
     /// Keep each simulated capture directory (`captures/<id>/capture`).
     pub keep_captures: bool,
+    /// Probe the refinement's basin on every capture (diagnosis.rs, `probe_basin`).
+    pub basin: Option<BasinProbe>,
 }
 
 /// What the runner reports while it works.
@@ -281,6 +285,8 @@ mod tests {
         Diagnosis {
             truth_loss: 0.2,
             truth_loss_true_objects: Some(0.1),
+            mask_ray_angle_deg: Some(0.4),
+            mask_ray_offset_m: Some(0.02),
             hypothesis_losses: vec![0.3],
             hypothesis_root_errors_m: vec![0.4],
             nearest_root_error_m: 0.4,
@@ -293,6 +299,23 @@ mod tests {
             truth_flip_loss: Some(0.35),
             truth_mask_losses: Some([0.2, 0.2]),
             class,
+            // One start closed, one diverged.
+            basin: vec![
+                BasinStart {
+                    offset_m: 0.35,
+                    turn_deg: 35.0,
+                    root_error_m: Some(0.1),
+                    facing_error_deg: Some(10.0),
+                    data_loss: Some(0.2),
+                },
+                BasinStart {
+                    offset_m: -0.35,
+                    turn_deg: -35.0,
+                    root_error_m: None,
+                    facing_error_deg: None,
+                    data_loss: None,
+                },
+            ],
         }
     }
 
@@ -364,7 +387,12 @@ mod tests {
         );
         // Diagnosis counts: one success, one search failure, none by information, one failed.
         assert!(
-            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 1 | 0.300 / 0.200 / 0.100 / 0.250 | 2 / 0 of 2 |"),
+            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 1 | 0.300 / 0.200 / 0.100 / 0.250 | 2 / 0 of 2 | 0.400 / 0.020 |"),
+            "{t}"
+        );
+        // The basin: two probed captures, two starts each, one closed and one diverged.
+        assert!(
+            t.contains("| tabletop-mug | 2 | 4 (±0.35 m, ±35°) | 2 of 4 | 2 | 0.100 | 2 of 4 | 0.200 | 0.300 |"),
             "{t}"
         );
         // Radiometric against the mask: the two captures where both ran.

@@ -1,7 +1,7 @@
 //! Running the benchmark: simulate each capture, stage 0–1 once, stage 2 per variant, the
 //! Random baseline and the diagnosis, then the report files.
 
-use super::diagnosis::diagnose;
+use super::diagnosis::{BasinProbe, diagnose};
 use super::table::{html, markdown_table};
 use super::{
     BenchProgress, CaptureResult, Planned, RANDOM_DRAWS, Report, Selection, Set, Variant,
@@ -95,7 +95,7 @@ pub fn run(
             &p,
             plan,
             priors,
-            (&variants_of(plan), &selection.config),
+            (&variants_of(plan), &selection.config, selection.basin),
             &thumbs,
             progress,
         )?);
@@ -114,7 +114,7 @@ pub fn run(
     )?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "variants": selection.variants, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": selection.config, "random_draws": RANDOM_DRAWS });
+    let record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "variants": selection.variants, "keep_captures": selection.keep_captures, "basin": selection.basin, "version": env!("CARGO_PKG_VERSION"), "config": selection.config, "random_draws": RANDOM_DRAWS });
     write_text(
         &stage.path("run.toml"),
         &toml::to_string(&record).map_err(|e| ser(&e))?,
@@ -170,7 +170,7 @@ fn run_capture(
     p: &Prepared,
     plan: &Planned,
     priors: BodyPriors<'_>,
-    (variants, base): (&[Variant], &ReconConfig),
+    (variants, base, basin): (&[Variant], &ReconConfig, Option<BasinProbe>),
     thumbs: &Path,
     progress: &dyn BenchProgress,
 ) -> Result<CaptureResult, EvalError> {
@@ -249,7 +249,7 @@ fn run_capture(
             &object_poses(&rec.objects),
         )?);
         if variant == Variant::Full {
-            result.diagnosis = Some(diagnose(p, priors, &rec, (seed, &cfg))?);
+            result.diagnosis = Some(diagnose(p, priors, &rec, (seed, &cfg), basin)?);
             save_png(
                 &overlay(&rec.pre.rise_k, &rec.pre.mask, &mask),
                 &thumbs.join("overlay.png"),

@@ -1,5 +1,5 @@
-//! The benchmark's Markdown tables (Table 1 per cell, failures, diagnosis counts, objects) and
-//! its HTML report.
+//! The benchmark's Markdown tables (Table 1 per cell, failures, diagnosis counts, the
+//! refinement's basin, objects) and its HTML report.
 
 use super::{CaptureResult, Diagnosis, FailureClass, RANDOM_DRAWS, Report, Variant};
 use crate::metrics::mean_ci95;
@@ -109,7 +109,61 @@ pub fn markdown_table(r: &Report) -> String {
     s.push_str(&diagnosis_table(r));
     s.push_str(&hypotheses_table(r));
     s.push_str(&radiometric_table(r));
+    s.push_str(&basin_table(r));
     s.push_str(&objects_table(r));
+    s
+}
+
+/// The refinement's basin per cell (`eval --basin`; empty when no capture was probed): how many
+/// starts near the truth the refinement brought back within a success's distance, and the
+/// medians at their ends next to the fit's own data term.
+pub fn basin_table(r: &Report) -> String {
+    if !r
+        .captures
+        .iter()
+        .any(|c| c.diagnosis.as_ref().is_some_and(|d| !d.basin.is_empty()))
+    {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\n| cell | captures probed | starts (offset, turn) | ended within 15 cm and 30° | diverged | root error at the end, median (m) | facing within 30° at the end | data term at the end, median | the fit's data term, median |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for c in Cell::ALL {
+        let ds: Vec<&Diagnosis> = of_cell(r, c)
+            .iter()
+            .filter_map(|x| x.diagnosis.as_ref())
+            .filter(|d| !d.basin.is_empty())
+            .collect();
+        let Some(first) = ds.first().and_then(|d| d.basin.first()) else {
+            continue;
+        };
+        let starts: Vec<&super::BasinStart> = ds.iter().flat_map(|d| &d.basin).collect();
+        let n = starts.len();
+        let closed = starts.iter().filter(|b| b.closed()).count();
+        let diverged = starts.iter().filter(|b| b.root_error_m.is_none()).count();
+        let root: Vec<f64> = starts.iter().filter_map(|b| b.root_error_m).collect();
+        let facing = starts
+            .iter()
+            .filter(|b| {
+                b.facing_error_deg
+                    .is_some_and(|f| f <= super::SUCCESS_FACING_DEG)
+            })
+            .count();
+        let data: Vec<f64> = starts.iter().filter_map(|b| b.data_loss).collect();
+        let fit: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.hypothesis_losses.first().copied())
+            .collect();
+        s.push_str(&format!(
+            "| {c} | {} | {n} (±{:.2} m, ±{:.0}°) | {closed} of {n} | {diverged} | {} | {facing} of {n} | {} | {} |\n",
+            ds.len(),
+            first.offset_m.abs(),
+            first.turn_deg.abs(),
+            median(&root),
+            median(&data),
+            median(&fit),
+        ));
+    }
     s
 }
 
@@ -119,7 +173,7 @@ pub fn diagnosis_table(r: &Report) -> String {
     for k in FailureClass::ALL {
         s.push_str(&format!(" {} |", k.heading()));
     }
-    s.push_str(" of the search failures, reachable by our model | full model failed | data term, median: fit / truth / truth through the true objects / our model refined from the truth | the truth beats its front/back flip: data term / mask |\n|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str(" of the search failures, reachable by our model | full model failed | data term, median: fit / truth / truth through the true objects / our model refined from the truth | the truth beats its front/back flip: data term / mask | stage 1's mirror on the mask, median: reflected-ray angle (°) / offset at the person (m) |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for c in Cell::ALL {
         let caps = of_cell(r, c);
         if caps.is_empty() {
@@ -165,12 +219,16 @@ pub fn diagnosis_table(r: &Report) -> String {
             .filter(|d| d.truth_mask_losses.is_some_and(|[t, f]| t < f))
             .count();
         let scored = ds.iter().filter(|d| d.truth_flip_loss.is_some()).count();
+        let angle: Vec<f64> = ds.iter().filter_map(|d| d.mask_ray_angle_deg).collect();
+        let offset: Vec<f64> = ds.iter().filter_map(|d| d.mask_ray_offset_m).collect();
         s.push_str(&format!(
-            " {reachable} | {failed} | {} / {} / {} / {} | {beats} / {beats_mask} of {scored} |\n",
+            " {reachable} | {failed} | {} / {} / {} / {} | {beats} / {beats_mask} of {scored} | {} / {} |\n",
             median(&fit),
             median(&truth),
             median(&through),
-            median(&started)
+            median(&started),
+            median(&angle),
+            median(&offset),
         ));
     }
     s
