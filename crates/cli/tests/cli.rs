@@ -567,6 +567,11 @@ fn eval_probes_the_refinement_basin() {
     signs.sort();
     signs.dedup();
     assert_eq!(signs.len(), 4, "every sign pair once: {basin:?}");
+    let record = std::fs::read_to_string(out.join("run.toml")).unwrap();
+    assert!(
+        record.contains("[basin]") && record.contains("offset_m = 0.2"),
+        "{record}"
+    );
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
     assert!(
         table.contains("| tabletop-wide | 1 | 4 (±0.20 m, ±20°) |"),
