@@ -357,21 +357,33 @@ fn refine_from_truth(
     (seed, cfg): (u64, &ReconConfig),
 ) -> Result<Option<(f64, f64)>, EvalError> {
     let hcfg = cfg.human_settings();
-    let (rad, _) = radiometry(&rec.pre, &rec.rays, priors.model, &hcfg)?;
+    with_problem(priors, rec, &hcfg, |problem, edge| {
+        let Some((end, _)) = problem.run(truth, &hcfg, Draw::Edge(edge), seed)? else {
+            return Ok(None);
+        };
+        let data = problem.full_eval(&end, &hcfg)?.data;
+        Ok(Some((data, (end.translation - true_root).norm())))
+    })
+}
+
+/// Runs `f` on stage 2's problem as the fit poses it for this reconstruction (its radiometry
+/// with `hcfg`) and the mask's edge distances.
+fn with_problem<R>(
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+    hcfg: &irmirror_recon::human::HumanConfig,
+    f: impl FnOnce(&HumanProblem<'_>, &irmirror_capture::Image<f64>) -> Result<R, EvalError>,
+) -> Result<R, EvalError> {
+    let (rad, _) = radiometry(&rec.pre, &rec.rays, priors.model, hcfg)?;
     let problem = human_problem(
         priors,
         &rec.rays,
         &rec.pre.mask,
         &rec.objects,
-        &hcfg,
+        hcfg,
         rad.as_ref(),
     );
-    let edge = edge_distance(&rec.pre.mask);
-    let Some((end, _)) = problem.run(truth, &hcfg, Draw::Edge(&edge), seed)? else {
-        return Ok(None);
-    };
-    let data = problem.full_eval(&end, &hcfg)?.data;
-    Ok(Some((data, (end.translation - true_root).norm())))
+    f(&problem, &edge_distance(&rec.pre.mask))
 }
 
 /// The refinement's basin: stage 2's refinement as `fit_human` runs it on each survivor of the
@@ -393,75 +405,69 @@ fn probe_basin(
     use irmirror_recon::human::search::facing_angle_deg;
     use rayon::prelude::*;
     let hcfg = cfg.human_settings();
-    let (rad, _) = radiometry(&rec.pre, &rec.rays, priors.model, &hcfg)?;
-    let problem = human_problem(
-        priors,
-        &rec.rays,
-        &rec.pre.mask,
-        &rec.objects,
-        &hcfg,
-        rad.as_ref(),
-    );
-    let edge = edge_distance(&rec.pre.mask);
-    let up = problem.up.normalize();
-    let mut line = truth.translation - problem.objects_centre;
-    line -= up * up.dot(&line);
-    let line = line
-        .try_normalize(1e-9)
-        .unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
-    let generator = irmirror_body::prior::generator::PoseGenerator::new(priors.model);
-    let mut rng = irmirror_geom::rng::seeded(seed, 21);
-    let stand = generator.template("stand", &mut rng).ok_or_else(|| {
-        irmirror_recon::ReconError::Config("the pose generator has no \"stand\" template".into())
-    })?;
-    let latent = priors.prior.encode(&stand)?;
-    // As fit_human: the mask first when a polish follows, the polish on the thermal rise.
-    let thermal = problem.radiometric(&hcfg).is_some();
-    let polish = thermal && hcfg.radiometric.polish_iterations > 0;
-    let mut mask_cfg = hcfg.clone();
-    mask_cfg.radiometric.enabled = thermal && !polish;
-    let polish_cfg = hcfg.polish();
-    let (d, a) = (b.offset_m, b.turn_deg);
-    let starts = [(d, a), (-d, -a), (d, -a), (-d, a)];
-    starts
-        .par_iter()
-        .enumerate()
-        .map(|(k, &(offset_m, turn_deg))| {
-            let start = HumanState {
-                translation: truth.translation + line * offset_m,
-                rotation: irmirror_geom::rotation::axis_angle_to_matrix(
-                    &(up * turn_deg.to_radians()),
-                ) * truth.rotation,
-                height: hcfg.height_prior[0],
-                latent: latent.clone(),
-            };
-            let run_seed = seed.wrapping_add(k as u64);
-            let mut end = problem
-                .run(&start, &mask_cfg, Draw::Edge(&edge), run_seed)?
-                .map(|(st, _)| st);
-            if polish && let Some(mid) = end {
-                end = problem
-                    .run(&mid, &polish_cfg, Draw::Edge(&edge), run_seed)?
+    with_problem(priors, rec, &hcfg, |problem, edge| {
+        let up = problem.up.normalize();
+        let mut line = truth.translation - problem.objects_centre;
+        line -= up * up.dot(&line);
+        let line = line
+            .try_normalize(1e-9)
+            .unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
+        let generator = irmirror_body::prior::generator::PoseGenerator::new(priors.model);
+        let mut rng = irmirror_geom::rng::seeded(seed, 21);
+        let stand = generator.template("stand", &mut rng).ok_or_else(|| {
+            irmirror_recon::ReconError::Config(
+                "the pose generator has no \"stand\" template".into(),
+            )
+        })?;
+        let latent = priors.prior.encode(&stand)?;
+        // As fit_human: the mask first when a polish follows, the polish on the thermal rise.
+        let thermal = problem.radiometric(&hcfg).is_some();
+        let polish = thermal && hcfg.radiometric.polish_iterations > 0;
+        let mut mask_cfg = hcfg.clone();
+        mask_cfg.radiometric.enabled = thermal && !polish;
+        let polish_cfg = hcfg.polish();
+        let (d, a) = (b.offset_m, b.turn_deg);
+        let starts = [(d, a), (-d, -a), (d, -a), (-d, a)];
+        starts
+            .par_iter()
+            .enumerate()
+            .map(|(k, &(offset_m, turn_deg))| {
+                let start = HumanState {
+                    translation: truth.translation + line * offset_m,
+                    rotation: irmirror_geom::rotation::axis_angle_to_matrix(
+                        &(up * turn_deg.to_radians()),
+                    ) * truth.rotation,
+                    height: hcfg.height_prior[0],
+                    latent: latent.clone(),
+                };
+                let run_seed = seed.wrapping_add(k as u64);
+                let mut end = problem
+                    .run(&start, &mask_cfg, Draw::Edge(edge), run_seed)?
                     .map(|(st, _)| st);
-            }
-            let Some(end) = end else {
-                return Ok(BasinStart {
+                if polish && let Some(mid) = end {
+                    end = problem
+                        .run(&mid, &polish_cfg, Draw::Edge(edge), run_seed)?
+                        .map(|(st, _)| st);
+                }
+                let Some(end) = end else {
+                    return Ok(BasinStart {
+                        offset_m,
+                        turn_deg,
+                        root_error_m: None,
+                        facing_error_deg: None,
+                        data_loss: None,
+                    });
+                };
+                Ok(BasinStart {
                     offset_m,
                     turn_deg,
-                    root_error_m: None,
-                    facing_error_deg: None,
-                    data_loss: None,
-                });
-            };
-            Ok(BasinStart {
-                offset_m,
-                turn_deg,
-                root_error_m: Some((end.translation - truth.translation).norm()),
-                facing_error_deg: Some(facing_angle_deg(&up, &end.rotation, &truth.rotation)),
-                data_loss: Some(problem.full_eval(&end, &hcfg)?.data),
+                    root_error_m: Some((end.translation - truth.translation).norm()),
+                    facing_error_deg: Some(facing_angle_deg(&up, &end.rotation, &truth.rotation)),
+                    data_loss: Some(problem.full_eval(&end, &hcfg)?.data),
+                })
             })
-        })
-        .collect()
+            .collect()
+    })
 }
 
 /// The truth as stage 2's model states it: the true height slider, the pose prior's encoding of
