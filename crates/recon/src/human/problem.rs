@@ -390,8 +390,7 @@ impl HumanProblem<'_> {
         vertices: &[Vector3<f64>],
         cfg: &HumanConfig,
     ) -> (f64, f64, Option<Scalars>, (Meet, Vec<f64>)) {
-        let mut renderer = SoftRenderer::new(vertices, &self.model.asset.faces);
-        renderer.set_vertices(vertices);
+        let renderer = SoftRenderer::new(vertices, &self.model.asset.faces);
         let params = OccupancyParams {
             sigma_m2: cfg.sigma_m2[1],
             aggregation: cfg.aggregation,
