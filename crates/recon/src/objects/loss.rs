@@ -65,10 +65,10 @@ impl Problem<'_> {
                 let dq = sdf.distance(&q);
                 let d = s * dq * inv;
                 // Value and derivative of the per-point term in d.
-                let (f, df) = if surface {
+                // Free space: one-sided Huber (smooth at the surface, so the residual form
+                // below has a finite Jacobian there).
+                let (f, df) = if surface || d < 0.0 {
                     huber(d, hub)
-                } else if d < 0.0 {
-                    (-d, -1.0)
                 } else {
                     (0.0, 0.0)
                 };
@@ -98,34 +98,21 @@ impl Problem<'_> {
         // is sphere-traced into the current object and its hit distance compared with the
         // measured one. Gradient by the implicit function theorem: with F(x; θ) = s·sdf(q) = 0 at
         // the hit x = t·r, dt/dθ = −(∂F/∂θ) / (∇ₓF · r).
-        if self.cfg.w_depth > 0.0 && self.cfg.depth_rays > 0 {
-            let stride = self.obs.surface.len().div_ceil(self.cfg.depth_rays).max(1);
+        if let Some(stride) = self.depth_stride() {
             let wd = self.cfg.w_depth * stride as f64 / self.obs.surface.len() as f64;
             let camera = r.tr_mul(&(-t)) / s; // the depth camera's centre, object frame
             for p in self.obs.surface.iter().step_by(stride) {
-                let (t_meas, ray) = (p.norm(), p.normalize());
-                let Some(t_obj) = render_depth(sdf, &camera, &r.tr_mul(&ray)) else {
+                let Some(hit) = self.trace(st, sdf, &camera, p) else {
                     continue;
                 };
-                let (t_hit, x) = (t_obj * s, ray * (t_obj * s));
-                let q = r.tr_mul(&(x - t)) / s;
-                let gq = sdf.gradient(&q);
-                let u = r * gq;
-                let cos = u.dot(&ray);
-                // Grazing rays: the hit distance is ill-conditioned there; the free-space term
-                // owns the silhouette.
-                if cos > -GRAZING_COS {
-                    continue;
-                }
-                let e = (t_hit - t_meas) * inv;
-                let (f, df) = huber(e, hub);
+                let (f, df) = huber(hit.e, hub);
                 loss += wd * f;
                 if let Some(g) = grad.as_deref_mut() {
                     // dL/dθ = wd · f'(e) / s₀ · dt/dθ, dt/dθ = −(∂F/∂θ)/cos.
-                    let c = -wd * df * inv / cos;
-                    g.t -= u * c;
-                    g.log_s += c * s * (sdf.distance(&q) - gq.dot(&q));
-                    g.rot += u.cross(&(x - t)) * c;
+                    let c = -wd * df * inv / hit.cos;
+                    g.t -= hit.u * c;
+                    g.log_s += c * s * (sdf.distance(&hit.q) - hit.gq.dot(&hit.q));
+                    g.rot += hit.u.cross(&(hit.x - t)) * c;
                 }
             }
         }
@@ -166,6 +153,116 @@ impl Problem<'_> {
         let shape = self.family.shape(&st.u);
         self.loss(st, shape.sdf().as_ref(), shape.base_y(), grad)
     }
+
+    /// Every how many surface points a camera ray is rendered (`None`: no rendered-depth term).
+    fn depth_stride(&self) -> Option<usize> {
+        (self.cfg.w_depth > 0.0 && self.cfg.depth_rays > 0)
+            .then(|| self.obs.surface.len().div_ceil(self.cfg.depth_rays).max(1))
+    }
+
+    /// The camera ray through the measured point `p` rendered into the object at `st` (object
+    /// frame camera centre `camera`): `None` when it misses or grazes (the hit distance is
+    /// ill-conditioned there; the free-space term owns the silhouette).
+    fn trace(
+        &self,
+        st: &State,
+        sdf: &dyn Sdf,
+        camera: &Vector3<f64>,
+        p: &Vector3<f64>,
+    ) -> Option<Hit> {
+        let (r, t, s) = (st.rotation, st.translation, st.log_scale.exp());
+        let (t_meas, ray) = (p.norm(), p.normalize());
+        let t_obj = render_depth(sdf, camera, &r.tr_mul(&ray))?;
+        let x = ray * (t_obj * s);
+        let q = r.tr_mul(&(x - t)) / s;
+        let gq = sdf.gradient(&q);
+        let u = r * gq;
+        let cos = u.dot(&ray);
+        (cos <= -GRAZING_COS).then(|| Hit {
+            e: (t_obj * s - t_meas) / self.s0,
+            x,
+            q,
+            gq,
+            u,
+            cos,
+        })
+    }
+
+    /// Number of residuals [`Self::residuals`] writes.
+    pub fn residual_count(&self) -> usize {
+        let depth = self
+            .depth_stride()
+            .map_or(0, |stride| self.obs.surface.len().div_ceil(stride));
+        self.obs.surface.len() + self.obs.free.len() + depth + 5
+    }
+
+    /// The loss as signed residuals, `½‖r‖² = eval`: each term `w·ρ(e)` becomes
+    /// `sign(e)·√(2wρ(e))` (for Levenberg–Marquardt, [`super::fit`]); a term that is off (a
+    /// point outside, a ray that misses, no plane, no size prior) writes 0, so the length is
+    /// fixed.
+    pub fn residuals(&self, st: &State, out: &mut [f64]) {
+        let shape = self.family.shape(&st.u);
+        let sdf = shape.sdf();
+        let sdf = sdf.as_ref();
+        let (r, t, s) = (st.rotation, st.translation, st.log_scale.exp());
+        let inv = 1.0 / self.s0;
+        let hub = self.cfg.huber_m * inv;
+        let res = |w: f64, e: f64| e.signum() * (2.0 * w * huber(e, hub).0).sqrt();
+        let dist = |p: &Vector3<f64>| s * sdf.distance(&(r.tr_mul(&(p - t)) / s)) * inv;
+        let mut k = 0;
+        let mut push = |v: f64| {
+            out[k] = v;
+            k += 1;
+        };
+        let ws = 1.0 / self.obs.surface.len() as f64;
+        for p in &self.obs.surface {
+            push(res(ws, dist(p)));
+        }
+        let wf = self.cfg.w_free / self.obs.free.len().max(1) as f64;
+        for p in &self.obs.free {
+            push(res(wf, dist(p).min(0.0)));
+        }
+        if let Some(stride) = self.depth_stride() {
+            let wd = self.cfg.w_depth * stride as f64 / self.obs.surface.len() as f64;
+            let camera = r.tr_mul(&(-t)) / s;
+            for p in self.obs.surface.iter().step_by(stride) {
+                push(
+                    self.trace(st, sdf, &camera, p)
+                        .map_or(0.0, |hit| res(wd, hit.e)),
+                );
+            }
+        }
+        let sp = (2.0 * self.cfg.w_plane).sqrt();
+        let n = self.ground.n();
+        let e_up = r * Vector3::y() - n;
+        for v in e_up.iter() {
+            push(sp * v);
+        }
+        let base = r * Vector3::new(0.0, shape.base_y(), 0.0) * s;
+        push(
+            sp * self
+                .ground
+                .plane
+                .map_or(0.0, |p| (n.dot(&(t + base)) - p.offset_m) * inv),
+        );
+        push(self.family.size_prior().map_or(0.0, |(mean, sigma)| {
+            self.cfg.w_size.sqrt() * (st.log_scale - mean) / sigma
+        }));
+    }
+}
+
+/// A rendered camera ray's hit ([`Problem::trace`]).
+struct Hit {
+    /// Rendered minus measured distance, in s₀.
+    e: f64,
+    /// The hit, depth frame.
+    x: Vector3<f64>,
+    /// The hit and the SDF's gradient there, object frame.
+    q: Vector3<f64>,
+    gq: Vector3<f64>,
+    /// The outward normal (unnormalised SDF gradient), depth frame, and its cosine with the ray.
+    u: Vector3<f64>,
+    cos: f64,
 }
 
 /// Rays meeting the surface at a normal-incidence cosine below this are not rendered.
@@ -247,7 +344,10 @@ mod tests {
         }
     }
 
-    fn pose_gradients_for(family: Family) {
+    /// A family shape seen from one side: surface points (a grid projected onto it), free points
+    /// 1 cm in front of them, a support plane, and a state away from the optimum so that every
+    /// term is active.
+    fn fixture(family: Family) -> (ObjectObservation, Ground, State) {
         let truth = State {
             rotation: upright(&Vector3::new(0.1, -0.9, -0.3).normalize(), 0.7),
             translation: Vector3::new(0.02, 0.1, 0.7),
@@ -282,6 +382,59 @@ mod tests {
             offset_m: -0.2,
             inlier_fraction: 1.0,
         });
+        let st = State {
+            rotation: axis_angle_to_matrix(&Vector3::new(0.05, -0.04, 0.03)) * truth.rotation,
+            translation: truth.translation + Vector3::new(0.004, -0.003, 0.005),
+            log_scale: truth.log_scale + 0.05,
+            u: truth.u,
+        };
+        (obs, ground, st)
+    }
+
+    /// The residual form Levenberg–Marquardt polishes is the loss Adam descends: ½‖r‖² equals
+    /// it, every term active (surface, free space, rendered depth, plane, the car's size prior)
+    /// and with the plane missing; its length is fixed.
+    #[test]
+    fn residuals_square_to_the_loss() {
+        for family in [Family::Bowl, Family::Mug, Family::Car] {
+            let (obs, ground, st) = fixture(family);
+            let cfg = ObjectConfig {
+                w_depth: 1.0,
+                ..ObjectConfig::default()
+            };
+            let no_plane = Ground {
+                plane: None,
+                ..ground
+            };
+            for ground in [&ground, &no_plane] {
+                let problem = Problem {
+                    family,
+                    obs: &obs,
+                    ground,
+                    s0: 0.07,
+                    cfg: &cfg,
+                };
+                let mut r = vec![f64::NAN; problem.residual_count()];
+                for u in [st.u, [0.1, 0.9]] {
+                    let s = State { u, ..st };
+                    problem.residuals(&s, &mut r);
+                    let (half, loss) = (
+                        0.5 * r.iter().map(|v| v * v).sum::<f64>(),
+                        problem.eval(&s, None),
+                    );
+                    let active = r.iter().filter(|v| **v != 0.0).count();
+                    assert!(
+                        (half - loss).abs() <= 1e-12 * loss && active > obs.surface.len(),
+                        "{family:?}: ½‖r‖² {half}, loss {loss}, {active} of {} residuals active",
+                        r.len()
+                    );
+                }
+            }
+        }
+    }
+
+    fn pose_gradients_for(family: Family) {
+        let (obs, ground, st) = fixture(family);
         // The rendered-depth term at full weight, so its gradient is a large part of the check.
         let cfg = ObjectConfig {
             w_depth: 1.0,
@@ -293,13 +446,6 @@ mod tests {
             ground: &ground,
             s0: 0.07,
             cfg: &cfg,
-        };
-        // Evaluate away from the optimum so every term is active.
-        let st = State {
-            rotation: axis_angle_to_matrix(&Vector3::new(0.05, -0.04, 0.03)) * truth.rotation,
-            translation: truth.translation + Vector3::new(0.004, -0.003, 0.005),
-            log_scale: truth.log_scale + 0.05,
-            u: truth.u,
         };
         let mut g = Grad {
             rot: Vector3::zeros(),
