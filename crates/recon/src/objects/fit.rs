@@ -89,8 +89,8 @@ impl Problem<'_> {
 }
 
 impl Problem<'_> {
-    /// Levenberg–Marquardt from `st` on the loss's residual form, the Jacobian by central
-    /// differences: the polish after Adam. Adam steps every coordinate at its own rate, so it
+    /// Levenberg–Marquardt from `st` on the loss's residual form (pose Jacobian analytic,
+    /// shape columns by central differences): the polish after Adam. Adam steps every coordinate at its own rate, so it
     /// wanders along the loss's nearly flat directions (a bowl's wall trades against its cut and
     /// scale) and stops wherever its schedule ends; a curvature-aware step walks down them
     /// (measured on a held-out bowl: Adam ended at the wall's upper bound, 2× the true wall,
@@ -109,31 +109,27 @@ impl Problem<'_> {
             }
             out
         };
-        // Difference steps well below the Huber width (3 mm ≈ 0.04 s₀) and well above
-        // round-off.
-        let h = |c: usize| if c < 7 { 1e-5 } else { 1e-4 };
-        let eval = |s: &State, r: &mut [f64], j: Option<&mut [f64]>| {
-            self.residuals(s, r);
+        // The shape's difference step, well below its resolution, well above round-off.
+        let h = 1e-4;
+        let eval = |s: &State, r: &mut [f64], mut j: Option<&mut [f64]>| {
+            // The pose columns analytically; the shape's by central differences.
+            self.residuals(s, r, j.as_deref_mut());
             let Some(j) = j else { return };
-            let (mut a, mut b, mut d) = (vec![0.0; m], vec![0.0; m], vec![0.0; n]);
-            for c in 0..n {
-                d[c] = h(c);
+            let (mut a, mut b) = (vec![0.0; m], vec![0.0; m]);
+            for c in 7..n {
+                let mut d = vec![0.0; n];
+                d[c] = h;
                 let sa = retract(s, &d);
-                d[c] = -h(c);
+                d[c] = -h;
                 let sb = retract(s, &d);
-                d[c] = 0.0;
                 // A shape parameter at its bound differences one-sidedly.
-                let span = if c < 7 {
-                    2.0 * h(c)
-                } else {
-                    sa.u[c - 7] - sb.u[c - 7]
-                };
+                let span = sa.u[c - 7] - sb.u[c - 7];
                 if span <= 0.0 {
                     (0..m).for_each(|i| j[i * n + c] = 0.0);
                     continue;
                 }
-                self.residuals(&sa, &mut a);
-                self.residuals(&sb, &mut b);
+                self.residuals(&sa, &mut a, None);
+                self.residuals(&sb, &mut b, None);
                 for i in 0..m {
                     j[i * n + c] = (a[i] - b[i]) / span;
                 }
