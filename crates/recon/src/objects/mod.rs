@@ -31,9 +31,9 @@
 //! normal; eight for a mug, whose handle's side is otherwise often missed) × starting shapes
 //! (two proportions; a bowl three walls as well), each run's best iterate kept. Then every run
 //! is polished by Levenberg–Marquardt on the same loss written as residuals (`polish_iterations`
-//! steps, Jacobian by central differences) and the best run kept: the depth camera barely sees a
-//! bowl's wall, so the loss is nearly flat along wall ↔ cut ↔ scale, where Adam's per-coordinate
-//! steps wander and stop wherever the schedule ends (held-out bowls fitted 1.5–2× too thick,
+//! steps; pose Jacobian analytic, shape columns by central differences) and the best run kept:
+//! the depth camera barely sees a bowl's wall, so the loss is nearly flat along wall ↔ cut ↔
+//! scale, where Adam's per-coordinate steps wander and stop wherever the schedule ends (held-out bowls fitted 1.5–2× too thick,
 //! their lips mirroring the person up to 52 cm off; with the polish 0.040 / 0.070 / 0.060 /
 //! 0.064 for 0.042 / 0.070 / 0.059 / 0.063). A mug gets up to three more restarts (then
 //! polished too), each turned so that its handle points at the depth points one of the three
