@@ -460,6 +460,30 @@ mod tests {
         (obs, ground, st)
     }
 
+    /// The settings the tests check at: the rendered-depth term at full weight, so that its
+    /// derivatives are a large part of every check.
+    fn full_depth() -> ObjectConfig {
+        ObjectConfig {
+            w_depth: 1.0,
+            ..ObjectConfig::default()
+        }
+    }
+
+    fn problem<'a>(
+        family: Family,
+        obs: &'a ObjectObservation,
+        ground: &'a Ground,
+        cfg: &'a ObjectConfig,
+    ) -> Problem<'a> {
+        Problem {
+            family,
+            obs,
+            ground,
+            s0: 0.07,
+            cfg,
+        }
+    }
+
     /// The residual form Levenberg–Marquardt polishes is the loss Adam descends: ½‖r‖² equals
     /// it, every term active (surface, free space, rendered depth, plane, the car's size prior)
     /// and with the plane missing; its length is fixed.
@@ -467,22 +491,13 @@ mod tests {
     fn residuals_square_to_the_loss() {
         for family in [Family::Bowl, Family::Mug, Family::Car] {
             let (obs, ground, st) = fixture(family);
-            let cfg = ObjectConfig {
-                w_depth: 1.0,
-                ..ObjectConfig::default()
-            };
+            let cfg = full_depth();
             let no_plane = Ground {
                 plane: None,
                 ..ground
             };
             for ground in [&ground, &no_plane] {
-                let problem = Problem {
-                    family,
-                    obs: &obs,
-                    ground,
-                    s0: 0.07,
-                    cfg: &cfg,
-                };
+                let problem = problem(family, &obs, ground, &cfg);
                 let mut r = vec![f64::NAN; problem.residual_count()];
                 for u in [st.u, [0.1, 0.9]] {
                     let s = State { u, ..st };
@@ -513,17 +528,8 @@ mod tests {
     fn residual_jacobian_matches_finite_differences() {
         for family in [Family::Bowl, Family::Mug, Family::Car] {
             let (obs, ground, st) = fixture(family);
-            let cfg = ObjectConfig {
-                w_depth: 1.0,
-                ..ObjectConfig::default()
-            };
-            let problem = Problem {
-                family,
-                obs: &obs,
-                ground: &ground,
-                s0: 0.07,
-                cfg: &cfg,
-            };
+            let cfg = full_depth();
+            let problem = problem(family, &obs, &ground, &cfg);
             let (m, n) = (problem.residual_count(), 7 + family.dims());
             let (mut r, mut j) = (vec![0.0; m], vec![f64::NAN; m * n]);
             problem.residuals(&st, &mut r, Some(&mut j));
@@ -571,18 +577,8 @@ mod tests {
 
     fn pose_gradients_for(family: Family) {
         let (obs, ground, st) = fixture(family);
-        // The rendered-depth term at full weight, so its gradient is a large part of the check.
-        let cfg = ObjectConfig {
-            w_depth: 1.0,
-            ..ObjectConfig::default()
-        };
-        let problem = Problem {
-            family,
-            obs: &obs,
-            ground: &ground,
-            s0: 0.07,
-            cfg: &cfg,
-        };
+        let cfg = full_depth();
+        let problem = problem(family, &obs, &ground, &cfg);
         let mut g = Grad {
             rot: Vector3::zeros(),
             t: Vector3::zeros(),
