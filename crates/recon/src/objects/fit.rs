@@ -90,12 +90,12 @@ impl Problem<'_> {
 
 impl Problem<'_> {
     /// Levenberg–Marquardt from `st` on the loss's residual form (pose Jacobian analytic,
-    /// shape columns by central differences): the polish after Adam. Adam steps every coordinate at its own rate, so it
-    /// wanders along the loss's nearly flat directions (a bowl's wall trades against its cut and
-    /// scale) and stops wherever its schedule ends; a curvature-aware step walks down them
-    /// (measured on a held-out bowl: Adam ended at the wall's upper bound, 2× the true wall,
-    /// with 4× the loss of the true shape). Returns the state and its loss, never worse than
-    /// `st`'s.
+    /// shape columns by central differences): the polish after Adam. Adam steps every
+    /// coordinate at its own rate, so it wanders along the loss's nearly flat directions (a
+    /// bowl's wall trades against its cut and scale) and stops wherever its schedule ends; a
+    /// curvature-aware step walks down them (measured on a held-out bowl: Adam ended at the
+    /// wall's upper bound, 2× the true wall, with 4× the loss of the true shape). Returns the
+    /// state and its loss (the caller keeps it only when lower than `st`'s).
     fn polish(&self, st: State) -> (State, f64) {
         let n = 7 + self.family.dims();
         let m = self.residual_count();

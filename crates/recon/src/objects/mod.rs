@@ -33,18 +33,19 @@
 //! is polished by Levenberg–Marquardt on the same loss written as residuals (`polish_iterations`
 //! steps; pose Jacobian analytic, shape columns by central differences) and the best run kept:
 //! the depth camera barely sees a bowl's wall, so the loss is nearly flat along wall ↔ cut ↔
-//! scale, where Adam's per-coordinate steps wander and stop wherever the schedule ends (held-out bowls fitted 1.5–2× too thick,
-//! their lips mirroring the person up to 52 cm off; with the polish 0.040 / 0.070 / 0.060 /
-//! 0.064 for 0.042 / 0.070 / 0.059 / 0.063). A mug gets up to three more restarts (then
-//! polished too), each turned so that its handle points at the depth points one of the three
-//! best runs' cup leaves unexplained (a 2 mm handle tube a few pixels wide has no gradient
-//! towards points 20° away, so all eight yaws can miss it; from the best run alone, a
-//! tuning-set mug stayed 24 % too large). Rotation and translation gradients are analytic
-//! (chain rule through the SDF gradient); shape gradients are central differences (2
-//! parameters).
+//! scale, where Adam's per-coordinate steps wander and stop wherever the schedule ends
+//! (held-out bowls fitted 1.5–2× too thick, their lips mirroring the person up to 52 cm off;
+//! with the polish 0.040 / 0.070 / 0.060 / 0.064 for 0.042 / 0.070 / 0.059 / 0.063). A mug gets
+//! up to three more restarts (then polished too), each turned so that its handle points at the
+//! depth points one of the three best runs' cup leaves unexplained (a 2 mm handle tube a few
+//! pixels wide has no gradient towards points 20° away, so all eight yaws can miss it; from the
+//! best run alone, a tuning-set mug stayed 24 % too large). Rotation and translation gradients
+//! are analytic (chain rule through the SDF gradient); shape gradients are central differences
+//! (2 parameters).
 //!
-//! Files: [`family`] (shape families), [`observation`] (what a fit sees), [`loss`] (the loss
-//! and its gradient, its residuals), [`fit`] (Adam restarts, the polish; the learned prior), [`stage`] (the driver).
+//! Files: [`family`] (shape families), [`observation`] (what a fit sees), [`loss`] (the loss,
+//! its gradient and its residuals), [`fit`] (Adam restarts, the polish; the learned prior),
+//! [`stage`] (the driver).
 
 mod family;
 mod fit;
