@@ -219,6 +219,7 @@ impl Problem<'_> {
                 w / (2.0 * w * huber(e, hub).0).sqrt()
             }
         };
+        let want = jac.is_some();
         let mut k = 0;
         // Writes one residual and, with `jac`, its 7 pose derivatives (rotation, translation in
         // s₀, log scale).
@@ -233,33 +234,37 @@ impl Problem<'_> {
             }
             k += 1;
         };
-        // A point term's distance and its pose derivatives (see `loss`).
+        // A point term's distance (object frame point and distance there)…
         let point = |p: &Vector3<f64>| {
             let q = r.tr_mul(&(p - t)) / s;
             let dq = sdf.distance(&q);
-            let gq = sdf.gradient(&q);
+            (s * dq * inv, q, dq)
+        };
+        // …and its pose derivatives times `f` (see `loss`), only when a Jacobian is asked for:
+        // the SDF gradient costs six distance evaluations, and most free points are outside.
+        let scaled = |(a, b, c): (Vector3<f64>, Vector3<f64>, f64), f: f64| (a * f, b * f, c * f);
+        let point_grad = |p: &Vector3<f64>, q: &Vector3<f64>, dq: f64, f: f64| {
+            let gq = sdf.gradient(q);
             let u = r * gq;
-            let d = s * dq * inv;
-            (
-                d,
+            scaled(
                 (
                     u.cross(&(p - t)) * inv,
                     -u * inv,
-                    s * (dq - gq.dot(&q)) * inv,
+                    s * (dq - gq.dot(q)) * inv,
                 ),
+                f,
             )
         };
-        let scaled = |(a, b, c): (Vector3<f64>, Vector3<f64>, f64), f: f64| (a * f, b * f, c * f);
         let ws = 1.0 / self.obs.surface.len() as f64;
         for p in &self.obs.surface {
-            let (d, g) = point(p);
-            push(res(ws, d), Some(scaled(g, dres(ws, d))));
+            let (d, q, dq) = point(p);
+            push(res(ws, d), want.then(|| point_grad(p, &q, dq, dres(ws, d))));
         }
         let wf = self.cfg.w_free / self.obs.free.len().max(1) as f64;
         for p in &self.obs.free {
-            let (d, g) = point(p);
+            let (d, q, dq) = point(p);
             if d < 0.0 {
-                push(res(wf, d), Some(scaled(g, dres(wf, d))));
+                push(res(wf, d), want.then(|| point_grad(p, &q, dq, dres(wf, d))));
             } else {
                 push(0.0, None);
             }
@@ -271,13 +276,16 @@ impl Problem<'_> {
                 match self.trace(st, sdf, &camera, p) {
                     Some(hit) => {
                         // de/dθ = −(∂F/∂θ)/(cos s₀), F = s·sdf(q) at the hit (see `loss`).
-                        let c = -inv / hit.cos;
-                        let g = (
-                            hit.u.cross(&(hit.x - t)) * c,
-                            -hit.u * c,
-                            c * s * (sdf.distance(&hit.q) - hit.gq.dot(&hit.q)),
-                        );
-                        push(res(wd, hit.e), Some(scaled(g, dres(wd, hit.e))));
+                        let g = want.then(|| {
+                            let c = -inv / hit.cos;
+                            let g = (
+                                hit.u.cross(&(hit.x - t)) * c,
+                                -hit.u * c,
+                                c * s * (sdf.distance(&hit.q) - hit.gq.dot(&hit.q)),
+                            );
+                            scaled(g, dres(wd, hit.e))
+                        });
+                        push(res(wd, hit.e), g);
                     }
                     None => push(0.0, None),
                 }
