@@ -245,12 +245,19 @@ pub fn write(stage: &Staging, prefix: &str, inputs: &ResultInputs<'_>) -> Result
     );
     save_png(&img, &p("views/overview.png"))?;
 
+    // Each hypothesis' body joints as posed (the latent's decoding and the residual), root
+    // zero: its rotation is `root_rotvec_rad`.
     let decoded: Vec<Vec<[f64; 3]>> = rec
-        .human
-        .hypotheses
+        .states
         .iter()
-        .map(|h| prior.decode_axis_angles(&h.latent))
-        .collect::<Result<_, _>>()?;
+        .map(|st| {
+            let mut r = irmirror_recon::human::joint_rotations(prior, st)?;
+            r[0] = irmirror_geom::nalgebra::Matrix3::identity();
+            Ok(r.iter()
+                .map(|m| irmirror_geom::rotation::matrix_to_axis_angle(m).into())
+                .collect())
+        })
+        .collect::<Result<_, irmirror_recon::ReconError>>()?;
     let params = serde_json::json!({
         "frame": "depth camera (OpenCV axes: +X right, +Y down, +Z forward), metres",
         "up": rec.objects.ground.up,

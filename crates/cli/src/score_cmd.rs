@@ -42,6 +42,9 @@ struct HypothesisFile {
     root_rotvec_rad: [f64; 3],
     height: f64,
     latent: Vec<f64>,
+    /// Absent in results without a pose residual.
+    #[serde(default)]
+    residual: Vec<f64>,
     loss: f64,
 }
 
@@ -85,6 +88,7 @@ pub fn read_result(dir: &Path, model: &BodyModel, prior: &PosePrior) -> Result<R
             .iter()
             .chain(&h.root_rotvec_rad)
             .chain(&h.latent)
+            .chain(&h.residual)
             .chain([&h.height])
             .all(|x| x.is_finite());
         if !finite {
@@ -100,6 +104,7 @@ pub fn read_result(dir: &Path, model: &BodyModel, prior: &PosePrior) -> Result<R
             )),
             height: h.height,
             latent: h.latent.clone(),
+            residual: h.residual.clone(),
         };
         let body = posed_body(model, prior, &st)
             .with_context(|| format!("{}: hypothesis {k}", params_path.display()))?;

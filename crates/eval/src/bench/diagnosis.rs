@@ -86,7 +86,8 @@ pub struct Diagnosis {
     #[serde(default)]
     pub right_facing_vertex_error_m: Option<f64>,
     /// Our model refined from the truth (true root position and rotation, the true height
-    /// slider, the prior's encoding of the true pose; the full stage-2 schedule): its data term.
+    /// slider, the prior's encoding of the true pose with the exact residual when the fit has
+    /// one; the refinement as the fit runs it on a survivor of the search): its data term.
     /// Lower than the fit's: the search missed a basin our model can reach (a true search
     /// failure); not lower while the true mesh is: our model (pose prior, mean-adult
     /// proportions) cannot represent what the true mesh explains.
@@ -96,9 +97,9 @@ pub struct Diagnosis {
     #[serde(default)]
     pub truth_start_root_error_m: Option<f64>,
     /// Our model *at* the truth, before any step (the true height slider, the pose prior's
-    /// encoding of the true pose, mean-adult proportions, the root placed by the rigid motion
-    /// that best aligns it onto the true mesh): its data term. What the pose prior and the mean
-    /// adult can state of this person.
+    /// encoding of the true pose — with the exact residual when the fit has one —, mean-adult
+    /// proportions, the root placed by the rigid motion that best aligns it onto the true
+    /// mesh): its data term. What our body model can state of this person.
     #[serde(default)]
     pub model_truth_loss: Option<f64>,
     /// The same state's mean per-vertex error against the true body, m: the floor the pose
@@ -263,7 +264,7 @@ pub(super) fn diagnose(
         .zip(&hypothesis_facing_errors_deg)
         .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
         .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
-    let truth_state = model_truth(p, priors, &truth)?;
+    let truth_state = model_truth(p, priors, &truth, hcfg.lr_residual > 0.0)?;
     let (truth_start_loss, truth_start_root_error_m) =
         refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
@@ -358,12 +359,38 @@ fn refine_from_truth(
 ) -> Result<Option<(f64, f64)>, EvalError> {
     let hcfg = cfg.human_settings();
     with_problem(priors, rec, &hcfg, |problem, edge| {
-        let Some((end, _)) = problem.run(truth, &hcfg, Draw::Edge(edge), seed)? else {
+        let Some(end) = refine_as_fit(problem, truth, &hcfg, edge, seed)? else {
             return Ok(None);
         };
         let data = problem.full_eval(&end, &hcfg)?.data;
         Ok(Some((data, (end.translation - true_root).norm())))
     })
+}
+
+/// Stage 2's refinement of one start as `fit_human` runs it on each survivor of the search:
+/// the mask's schedule when a thermal polish follows (the rise throughout otherwise), then
+/// the polish on the rise when the capture has one. `None`: it diverged.
+fn refine_as_fit(
+    problem: &HumanProblem<'_>,
+    start: &HumanState,
+    hcfg: &irmirror_recon::human::HumanConfig,
+    edge: &irmirror_capture::Image<f64>,
+    seed: u64,
+) -> Result<Option<HumanState>, EvalError> {
+    let thermal = problem.radiometric(hcfg).is_some();
+    let polish = thermal && hcfg.radiometric.polish_iterations > 0;
+    let mut mask_cfg = hcfg.clone();
+    mask_cfg.radiometric.enabled = thermal && !polish;
+    let mut end = problem
+        .run(start, &mask_cfg, Draw::Edge(edge), seed)?
+        .map(|(st, _)| st);
+    if polish && let Some(mid) = end {
+        let sample = problem.polish_sample(hcfg, seed);
+        end = problem
+            .polish(&mid, hcfg, sample.as_ref(), seed)?
+            .map(|(st, _)| st);
+    }
+    Ok(end)
 }
 
 /// Runs `f` on stage 2's problem as the fit poses it for this reconstruction (its radiometry
@@ -420,12 +447,6 @@ fn probe_basin(
             )
         })?;
         let latent = priors.prior.encode(&stand)?;
-        // As fit_human: the mask first when a polish follows, the polish on the thermal rise.
-        let thermal = problem.radiometric(&hcfg).is_some();
-        let polish = thermal && hcfg.radiometric.polish_iterations > 0;
-        let mut mask_cfg = hcfg.clone();
-        mask_cfg.radiometric.enabled = thermal && !polish;
-        let polish_cfg = hcfg.polish();
         let (d, a) = (b.offset_m, b.turn_deg);
         let starts = [(d, a), (-d, -a), (d, -a), (-d, a)];
         starts
@@ -439,16 +460,9 @@ fn probe_basin(
                     ) * truth.rotation,
                     height: hcfg.height_prior[0],
                     latent: latent.clone(),
+                    residual: Vec::new(),
                 };
-                let run_seed = seed.wrapping_add(k as u64);
-                let mut end = problem
-                    .run(&start, &mask_cfg, Draw::Edge(edge), run_seed)?
-                    .map(|(st, _)| st);
-                if polish && let Some(mid) = end {
-                    end = problem
-                        .run(&mid, &polish_cfg, Draw::Edge(edge), run_seed)?
-                        .map(|(st, _)| st);
-                }
+                let end = refine_as_fit(problem, &start, &hcfg, edge, seed.wrapping_add(k as u64))?;
                 let Some(end) = end else {
                     return Ok(BasinStart {
                         offset_m,
@@ -471,22 +485,31 @@ fn probe_basin(
 }
 
 /// The truth as stage 2's model states it: the true height slider, the pose prior's encoding of
-/// the true pose (mean-adult proportions otherwise), and the root placed by the rigid motion
-/// that best aligns that body onto the true mesh `truth` (from the true root position and
-/// rotation): a fit finds the root's place and rotation, so a prior whose encoding tilts the
-/// whole body is not charged for the tilt.
+/// the true pose — with a pose residual (`residual`), each body joint's rotation from that
+/// decoding to the true one, so the pose is exact — mean-adult proportions otherwise, and the
+/// root placed by the rigid motion that best aligns that body onto the true mesh `truth` (from
+/// the true root position and rotation): a fit finds the root's place and rotation, so a prior
+/// whose encoding tilts the whole body is not charged for the tilt.
 fn model_truth(
     p: &Prepared,
     priors: BodyPriors<'_>,
     truth: &[Vector3<f64>],
+    residual: bool,
 ) -> Result<HumanState, EvalError> {
     let person = &p.scene.person;
+    let latent = priors.prior.encode(&person.rotvec_rad)?;
+    let residual = if residual {
+        irmirror_recon::human::residual_to(priors.prior, &latent, &person.rotvec_rad)?
+    } else {
+        Vec::new()
+    };
     let at_root = HumanState {
         translation: p.sim.body.joints[0],
         rotation: p.sim.body.depth_from_anny.rotation
             * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(person.rotvec_rad[0])),
         height: person.phenotype.height,
-        latent: priors.prior.encode(&person.rotvec_rad)?,
+        latent,
+        residual,
     };
     let ours = posed_body(priors.model, priors.prior, &at_root)?.vertices;
     // Vertices are root rotation × rest-relative offsets + root, so a rigid motion of every

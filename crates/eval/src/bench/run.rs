@@ -302,6 +302,7 @@ fn random_baseline(
                 rotation: truth_root,
                 height: irmirror_recon::human::HEIGHT_MEAN,
                 latent,
+                residual: Vec::new(),
             };
             let body = posed_body(model, prior, &st)?;
             let mask = fitted_mask(model, &rays, &body);

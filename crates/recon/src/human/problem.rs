@@ -33,10 +33,8 @@ const HEIGHT_STEP: f64 = 1e-4;
 impl HumanProblem<'_> {
     /// The pose of a state (36 rotations; root first).
     pub fn pose(&self, st: &HumanState) -> Result<Pose<f64>, ReconError> {
-        let mut rotations = self.prior.decode(&st.latent)?;
-        rotations[0] = st.rotation;
         Ok(Pose {
-            rotations,
+            rotations: super::joint_rotations(self.prior, st)?,
             translation: st.translation,
         })
     }
@@ -93,7 +91,7 @@ impl HumanProblem<'_> {
     }
 
     /// The stage-2 loss of the body at `at` on `batch`, and the soft IoU. With `grad` (length
-    /// [`ROOT_PARAMS`] + latent), writes `∂L/∂(t, ω, h, latent)` there.
+    /// [`ROOT_PARAMS`] + latent + residual), writes `∂L/∂(t, ω, h, latent, residual)` there.
     pub fn loss_grad(
         &self,
         ws: &mut Scratch,
@@ -108,16 +106,20 @@ impl HumanProblem<'_> {
             base,
             height,
             latent,
+            residual,
         } = *at;
         let Batch { rays, sigma_m2, .. } = *batch;
-        let st = HumanState {
-            translation: *t,
-            rotation: axis_angle_to_matrix(omega) * base,
-            height,
-            latent: latent.to_vec(),
-        };
+        let rotation = axis_angle_to_matrix(omega) * base;
         self.set_height(ws, height)?;
-        let pose = self.pose(&st)?;
+        let mut rotations = self.prior.decode(latent)?;
+        // The decoding itself, for the residual's backward.
+        let decoded = (!residual.is_empty()).then(|| rotations.clone());
+        rotations[0] = rotation;
+        super::compose_residual(&mut rotations[1..], residual)?;
+        let pose = Pose {
+            rotations,
+            translation: *t,
+        };
         self.model.pose_into(&ws.shaped, &pose, &mut ws.posed)?;
         let r = ws
             .renderer
@@ -134,10 +136,12 @@ impl HumanProblem<'_> {
         ws.scalars = scalars;
         ws.data = l_data;
         let prior: f64 = latent.iter().map(|x| x * x).sum();
+        let prior_residual: f64 = residual.iter().map(|x| x * x).sum();
         let up = self.up.normalize();
         let mut loss = l_data
             + cfg.w_prior * prior
-            + cfg.w_upright * (1.0 - (st.rotation * Vector3::z()).dot(&up));
+            + cfg.w_residual * prior_residual
+            + cfg.w_upright * (1.0 - (rotation * Vector3::z()).dot(&up));
         let [h_mean, h_sigma] = cfg.height_prior;
         let e_h = (height - h_mean) / h_sigma;
         loss += cfg.w_height * e_h * e_h;
@@ -186,6 +190,19 @@ impl HumanProblem<'_> {
         // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
         bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
         let d_omega = axis_angle_to_matrix_vjp(omega, &(bg.rotations[0] * base.transpose()));
+        // R_j = D_j exp(δ_j): ∂L/∂δ_j from ∂L/∂exp(δ_j) = D_jᵀ G_j, and ∂L/∂D_j = G_j exp(δ_j)ᵀ.
+        let n_lat = latent.len();
+        if let Some(decoded) = &decoded {
+            let g_res = &mut g[ROOT_PARAMS + n_lat..];
+            for (j, w) in residual.chunks_exact(3).enumerate() {
+                let w = Vector3::new(w[0], w[1], w[2]);
+                let (d, gj) = (&decoded[j + 1], bg.rotations[j + 1]);
+                let d_w = axis_angle_to_matrix_vjp(&w, &(d.transpose() * gj))
+                    + w * (2.0 * cfg.w_residual);
+                g_res[3 * j..3 * j + 3].copy_from_slice(d_w.as_slice());
+                bg.rotations[j + 1] = gj * axis_angle_to_matrix(&w).transpose();
+            }
+        }
         let d_lat = self.prior.decode_vjp(latent, &bg.rotations)?;
         g[..3].copy_from_slice(bg.translation.as_slice());
         g[3..6].copy_from_slice(d_omega.as_slice());
@@ -406,7 +423,7 @@ impl HumanProblem<'_> {
     }
 
     /// Every ray, with `target` = [`Self::targets`], at the final σ.
-    fn full_batch<'b>(&'b self, target: &'b [f64], cfg: &HumanConfig) -> Batch<'b> {
+    pub(crate) fn full_batch<'b>(&'b self, target: &'b [f64], cfg: &HumanConfig) -> Batch<'b> {
         Batch {
             rays: self.rays,
             target,
@@ -454,6 +471,7 @@ impl HumanProblem<'_> {
             base: &st.rotation,
             height: st.height,
             latent: &st.latent,
+            residual: &st.residual,
         };
         self.loss_grad(ws, &at, batch, cfg, None)
     }
@@ -498,12 +516,18 @@ impl HumanProblem<'_> {
         let base = st.rotation;
         let mut omega = Vector3::zeros();
         let n_lat = st.latent.len();
-        let n = ROOT_PARAMS + n_lat;
+        // The residual is stepped when its rate is on (from zero where a state has none).
+        if cfg.lr_residual > 0.0 && st.residual.is_empty() {
+            st.residual = vec![0.0; super::RESIDUAL_PARAMS];
+        }
+        let n_res = st.residual.len();
+        let n = ROOT_PARAMS + n_lat + n_res;
         let mut adam = Adam::new(n, AdamParams::default());
         let mut lr = vec![cfg.lr_translation; 3];
         lr.extend([cfg.lr_rotation; 3]);
         lr.push(cfg.lr_height);
         lr.extend(vec![cfg.lr_latent; n_lat]);
+        lr.extend(vec![cfg.lr_residual; n_res]);
         let mut rng = irmirror_geom::rng::seeded(seed, 31);
         // What a step draws: the radiometric term's pixels (with every ray their predictions
         // weigh), else rays.
@@ -614,6 +638,7 @@ impl HumanProblem<'_> {
                 base: &base,
                 height: st.height,
                 latent: &st.latent,
+                residual: &st.residual,
             };
             let (loss, _) = self.loss_grad(&mut ws, &at, &batch, cfg, Some(&mut g))?;
             if !loss.is_finite() || g.iter().any(|x| !x.is_finite()) {
@@ -629,6 +654,9 @@ impl HumanProblem<'_> {
             st.height = (st.height - step[6] * decay).clamp(0.0, 1.0);
             for k in 0..n_lat {
                 st.latent[k] -= step[ROOT_PARAMS + k] * decay;
+            }
+            for k in 0..n_res {
+                st.residual[k] -= step[ROOT_PARAMS + n_lat + k] * decay;
             }
         }
         st.rotation = axis_angle_to_matrix(&omega) * base;

@@ -88,6 +88,15 @@ pub struct RadiometricConfig {
     /// The polish's learning rates as a share of the refinement's (it starts from a converged
     /// state: full rates kick it out of its basin in the first steps).
     pub polish_lr_scale: f64,
+    /// Rays of the polish's one fixed batch (every mask pixel's, up to half of them, and a
+    /// uniform sample of the others, importance-weighted: an unbiased estimate of the loss the
+    /// hypotheses are ranked on); 0: every ray. Each step drawing afresh by edge sampling made
+    /// the polish a random walk on an edge-weighted loss: from the truth itself, 40 such steps
+    /// raised the rise's data term on 3 of 8 tuning bowls (one 0.198 → 0.323), while the same
+    /// steps on every ray lowered it on all 8. A sample, not every ray: the demo capture's
+    /// 42,657 rays made the polish of two hypotheses about 6 s (tuning bowls, 8,000 against
+    /// every ray: fits' data term median 0.177 / 0.170, per-vertex 0.30 / 0.30 m).
+    pub polish_rays: usize,
     /// Integrate each pixel's footprint (4 rays through the pixel's box, their mean convolved
     /// with the capture's point spread; [`crate::pipeline::FOOTPRINT_OFFSETS`]) rather than
     /// one ray at its centre, when the reflection mask has at most this many pixels (0: never).
@@ -109,6 +118,7 @@ impl Default for RadiometricConfig {
             polish_iterations: 40,
             polish_best: 1,
             polish_lr_scale: 0.25,
+            polish_rays: 8000,
             footprint_max_mask_px: 1000,
         }
     }

@@ -21,7 +21,8 @@
 //!    rounds and the refinement fit the mask too, the best `polish_best` refined hypotheses by
 //!    the rise (default 1; 0: all) and the best one's front/back partner then take that many
 //!    steps on the thermal rise (at `polish_lr_scale` of the learning rates: they start
-//!    converged), and the final ranking is on the rise — where front and back
+//!    converged; on one fixed batch, `polish_rays`: the loss they are ranked on), and the
+//!    final ranking is on the rise — where front and back
 //!    differ; with 0 the rounds and the refinement fit the rise throughout.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
 //!    (root > 25 cm or facing > 45° apart, as reported hypotheses), and the front/back flip of
@@ -241,6 +242,7 @@ impl HumanProblem<'_> {
                     rotation: Matrix3::identity(),
                     height,
                     latent,
+                    residual: Vec::new(),
                 };
                 let body = super::posed_body(self.model, self.prior, &st)?;
                 let lowest = body
@@ -280,6 +282,7 @@ impl HumanProblem<'_> {
                         rotation,
                         height,
                         latent: latent.clone(),
+                        residual: Vec::new(),
                     });
                 }
             }
@@ -341,9 +344,12 @@ impl HumanProblem<'_> {
             .map(|(_, st)| st)
             .collect();
         for round in 0..s.rounds {
+            // The rounds move the prior's poses only: a few steps are to fall into a basin,
+            // and the residual's freedom would let a wrong one fit its outline as well.
             let round_cfg = HumanConfig {
                 iterations: s.first_steps << round,
                 sigma_m2: s.round_sigma_m2,
+                lr_residual: 0.0,
                 ..cfg.clone()
             };
             let mut scored: Vec<(f64, HumanState)> = candidates
@@ -443,6 +449,41 @@ impl HumanProblem<'_> {
     }
 }
 
+impl HumanProblem<'_> {
+    /// The thermal polish's fixed batch: a stratified sample of `polish_rays` rays, or `None`
+    /// for every ray (`polish_rays` = 0).
+    pub fn polish_sample(&self, cfg: &HumanConfig, seed: u64) -> Option<Stratified> {
+        let n = cfg.radiometric.polish_rays;
+        (n > 0).then(|| self.stratified_batch(n, seed, true))
+    }
+
+    /// The thermal polish of one refined state: [`HumanConfig::polish`]'s steps on the rise
+    /// over the fixed batch `sample` ([`Self::polish_sample`]); `None` if it diverged.
+    pub fn polish(
+        &self,
+        st: &HumanState,
+        cfg: &HumanConfig,
+        sample: Option<&Stratified>,
+        seed: u64,
+    ) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
+        let target;
+        let batch = match sample {
+            Some(s) => Batch {
+                rays: &s.rays,
+                target: &s.target,
+                weight: Some(&s.weight),
+                rise: s.rise.as_ref().map(|(sel, w)| sel.rise(Some(w))),
+                sigma_m2: cfg.sigma_m2[1],
+            },
+            None => {
+                target = self.targets();
+                self.full_batch(&target, cfg)
+            }
+        };
+        self.run(st, &cfg.polish(), Draw::Fixed(batch), seed)
+    }
+}
+
 /// A fixed stratified batch of rays ([`HumanProblem::stratified_batch`]).
 pub struct Stratified {
     /// The rays.
@@ -476,7 +517,6 @@ struct Refined {
 fn polish_rise(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
-    edge_dist: &irmirror_capture::Image<f64>,
     seed: u64,
     refined: &mut [Option<Refined>],
 ) -> Result<(), ReconError> {
@@ -515,17 +555,12 @@ fn polish_rise(
         }
         chosen
     };
-    let polish_cfg = cfg.polish();
+    let sample = problem.polish_sample(cfg, seed);
     let polished: Vec<_> = chosen
         .par_iter()
         .map(|&i| {
             let r = refined[i].as_ref().expect("chosen among the refined");
-            let end = problem.run(
-                &r.state,
-                &polish_cfg,
-                Draw::Edge(edge_dist),
-                run_seed(seed, r.init),
-            )?;
+            let end = problem.polish(&r.state, cfg, sample.as_ref(), run_seed(seed, r.init))?;
             Ok((i, end))
         })
         .collect::<Result<_, ReconError>>()?;
@@ -582,7 +617,7 @@ pub fn fit_human(
         .collect::<Result<_, ReconError>>()?;
     if polish > 0 {
         tracing::debug!("mask refinement: {:.2} s", t0.elapsed().as_secs_f64());
-        polish_rise(problem, cfg, &edge_dist, seed, &mut refined)?;
+        polish_rise(problem, cfg, seed, &mut refined)?;
     }
     tracing::debug!("refinement: {:.2} s", t0.elapsed().as_secs_f64());
     let diverged = refined.iter().filter(|r| r.is_none()).count();
@@ -612,6 +647,7 @@ pub fn fit_human(
                 height: st.height,
                 stature_m: stature_m(&shaped_body(problem.model, st.height)?),
                 latent: st.latent.clone(),
+                residual: st.residual.clone(),
                 loss: eval.loss,
                 data_loss: eval.data,
                 soft_iou: eval.soft_iou,
