@@ -1,4 +1,4 @@
-//! Helpers shared by the stage-2 test binaries (`human`, `radiometric`): the body model and
+//! Helpers shared by the stage-2 test binaries (`human`, `pose`, `radiometric`): the body model and
 //! prior, simulated car and tabletop captures with the true objects' reflected rays, and the
 //! stage-2 problem on them. Each binary uses a subset.
 #![allow(dead_code)]
@@ -190,5 +190,37 @@ pub fn true_root(
     (
         r * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(sc.person.rotvec_rad[0])),
         r * Vector3::z(),
+    )
+}
+
+/// Stage 0's products with the thermal rise as it would hand them over: noise-free radiance
+/// plus 50 mK of seeded noise (the term subtracts what noise of the stated σ scores), and the
+/// simulator's optics (the term convolves the footprints with them).
+pub fn thermal_preprocessed(
+    sc: &SceneFile,
+    sim: &irmirror_sim::Simulation,
+) -> irmirror_recon::preprocess::Preprocessed {
+    let (with, without) = &sim.radiance;
+    let t_of = irmirror_capture::planck::temperature_of;
+    let mut rng = <rand::rngs::StdRng as rand::SeedableRng>::seed_from_u64(5);
+    let rise = irmirror_capture::Image {
+        width: with.width,
+        height: with.height,
+        data: with
+            .data
+            .iter()
+            .zip(&without.data)
+            .map(|(a, b)| {
+                let n: f64 =
+                    rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
+                t_of(*a) - t_of(*b) + 0.05 * n
+            })
+            .collect(),
+    };
+    preprocessed(
+        sim,
+        rise,
+        Some(sc.ambient_c + irmirror_capture::planck::ZERO_C_K),
+        sc.sensor.blur_px,
     )
 }
