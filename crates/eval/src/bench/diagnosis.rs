@@ -4,7 +4,7 @@
 use super::run::Prepared;
 use crate::EvalError;
 use crate::score::{facing_error_deg, vertex_error};
-use irmirror_recon::human::{Draw, HumanProblem, HumanState, edge_distance, posed_body};
+use irmirror_recon::human::{HumanProblem, HumanState, edge_distance, posed_body};
 use irmirror_recon::objects::{FittedObject, Objects};
 use irmirror_recon::pipeline::{
     BodyPriors, ReconConfig, Reconstruction, human_problem, radiometry, reflected_rays,
@@ -379,10 +379,9 @@ fn refine_as_fit(
 ) -> Result<Option<HumanState>, EvalError> {
     let thermal = problem.radiometric(hcfg).is_some();
     let polish = thermal && hcfg.radiometric.polish_iterations > 0;
-    let mut mask_cfg = hcfg.clone();
-    mask_cfg.radiometric.enabled = thermal && !polish;
+    let sample = problem.refine_sample(hcfg, seed);
     let mut end = problem
-        .run(start, &mask_cfg, Draw::Edge(edge), seed)?
+        .refine(start, hcfg, edge, sample.as_ref(), seed)?
         .map(|(st, _)| st);
     if polish && let Some(mid) = end {
         let sample = problem.polish_sample(hcfg, seed);

@@ -22,7 +22,12 @@
 //! pose prior's VJPs and the phenotype's (piecewise-linear) shape map (all analytic; see the
 //! crates' FD tests).
 //!
-//! * **Edge sampling.** Each iteration draws `rays_per_iteration` rays without replacement with
+//! * **Edge sampling.** The refinement's fixed batch (`refine_rays`, for a tabletop-sized
+//!   capture) draws each
+//!   stratum's rays with probability ∝ `(1 − α) + α exp(−e/τ)` at the curriculum's final
+//!   `edge_mix` and `edge_tau_px[1]`, importance-weighted: the same loss, estimated with more of
+//!   the rays that decide the outline. Ablated: a uniform stratified batch. With
+//!   `refine_rays` = 0 (the paper's refinement), each iteration draws `rays_per_iteration` rays without replacement with
 //!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
 //!   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the iterations (curriculum).
 //!   Ablated: uniform draws of the same count. With the mask's data term the draws are made
@@ -42,12 +47,14 @@ mod edge;
 mod observe;
 mod problem;
 pub mod radiometric;
+mod refine;
 pub mod search;
 
 pub use edge::edge_distance;
 pub use problem::{Draw, FullEval, Scratch};
 
 pub use observe::{Rise, Selection};
+pub use refine::Stratified;
 pub use search::{SearchConfig, fit_human, flipped};
 
 use crate::ReconError;
@@ -75,6 +82,12 @@ pub struct HumanConfig {
     pub rays_per_iteration: usize,
     /// Largest fraction of all rays drawn per step (edge sampling needs a choice to make).
     pub max_ray_fraction: f64,
+    /// Rays of the refinement's fixed batch (stratified, edge-focused when `edge_sampling` is
+    /// on, importance-weighted: [`HumanProblem::focused_batch`]) when the reflection has at
+    /// most half as many pixels and the capture not many more ([`HumanProblem::refine_sample`]);
+    /// else, and with 0, fresh draws every step (edge sampling's curriculum, the paper's
+    /// refinement).
+    pub refine_rays: usize,
     /// Margin of the active set, m: with the mask's data term, each step draws only among the
     /// mask's rays and those passing within this distance of the body (the others add
     /// nothing to the soft IoU); 0 draws among all rays.
@@ -101,6 +114,10 @@ pub struct HumanConfig {
     /// latent, which cannot state every pose (its encoding of the benchmark's poses is 4–12 cm
     /// off per vertex). 0: the latent alone, as the paper.
     pub lr_residual: f64,
+    /// The share of the learning rates the refinement runs at on its fixed batch
+    /// (`refine_rays`; the search's rounds and the refinement on fresh draws run at the full
+    /// rates).
+    pub refine_lr_scale: f64,
     /// Weight of `‖z‖²`.
     pub w_prior: f64,
     /// Weight of the residual's prior `Σ ‖δ_j‖²` (rad²).
@@ -145,6 +162,7 @@ impl HumanConfig {
             ("lr_residual", self.lr_residual),
             ("w_residual", self.w_residual),
             ("active_margin_m", self.active_margin_m),
+            ("refine_lr_scale", self.refine_lr_scale),
             (
                 "radiometric.polish_lr_scale",
                 self.radiometric.polish_lr_scale,
@@ -165,19 +183,30 @@ impl HumanConfig {
         Ok(())
     }
 
-    /// The thermal polish's settings: `radiometric.polish_iterations` steps at the final blur,
-    /// the learning rates scaled by `radiometric.polish_lr_scale`.
-    pub fn polish(&self) -> HumanConfig {
-        let k = self.radiometric.polish_lr_scale;
+    /// The same settings with every learning rate scaled by `k`.
+    fn lr_scaled(&self, k: f64) -> HumanConfig {
         HumanConfig {
-            iterations: self.radiometric.polish_iterations,
-            sigma_m2: [self.sigma_m2[1]; 2],
             lr_translation: self.lr_translation * k,
             lr_rotation: self.lr_rotation * k,
             lr_height: self.lr_height * k,
             lr_latent: self.lr_latent * k,
             lr_residual: self.lr_residual * k,
             ..self.clone()
+        }
+    }
+
+    /// The fixed-batch refinement's settings: the learning rates scaled by `refine_lr_scale`.
+    pub fn refinement(&self) -> HumanConfig {
+        self.lr_scaled(self.refine_lr_scale)
+    }
+
+    /// The thermal polish's settings: `radiometric.polish_iterations` steps at the final blur,
+    /// the learning rates scaled by `radiometric.polish_lr_scale`.
+    pub fn polish(&self) -> HumanConfig {
+        HumanConfig {
+            iterations: self.radiometric.polish_iterations,
+            sigma_m2: [self.sigma_m2[1]; 2],
+            ..self.lr_scaled(self.radiometric.polish_lr_scale)
         }
     }
 }
@@ -189,6 +218,7 @@ impl Default for HumanConfig {
             iterations: 150,
             rays_per_iteration: 3000,
             max_ray_fraction: 0.5,
+            refine_rays: 3000,
             active_margin_m: 0.25,
             active_every: 10,
             edge_sampling: true,
@@ -200,6 +230,7 @@ impl Default for HumanConfig {
             lr_height: 0.01,
             lr_latent: 0.08,
             lr_residual: 0.02,
+            refine_lr_scale: 0.5,
             w_prior: 2e-3,
             w_residual: 0.1,
             w_upright: 0.05,
