@@ -114,7 +114,7 @@ fn the_thermal_polish_descends_from_the_truth() {
 /// true height), a batch's loss at the final blur does not rise (car seeds 1–4: 0.196 → 0.052,
 /// 0.207 → 0.101, 0.287 → 0.042, 0.272 → 0.085; at the full rates seed 4 rose to 0.304, 31 cm
 /// off). Fresh edge draws at the full rates carried even the truth away on the tuning bowls
-/// (the rise's data term 0.108 → 0.218, 0.111 → 0.188 after the polish).
+/// (the rise's data term 0.111 → 0.188, 0.132 → 0.253 after the polish).
 #[test]
 fn the_refinement_descends_its_batch_from_the_truth() {
     use irmirror_recon::human::*;

@@ -32,9 +32,9 @@
 //!    rays, edge-focused and importance-weighted ([`HumanProblem::focused_batch`]), at
 //!    `refine_lr_scale` of the learning rates: they start in a basin the rounds found. On
 //!    fresh edge draws at the full rates (the paper's schedule, `refine_rays` = 0) Adam
-//!    random-walked: from the exact truth it raised the rise's data term on 5 of 8 tuning
-//!    bowls (0.108 → 0.218, 0.111 → 0.188, 0.132 → 0.245); on the fixed batch at half the
-//!    rates it stayed within 0.025 on 7 of 8. A larger capture (a car door) keeps the fresh
+//!    random-walked: from the exact truth it raised the rise's data term by more than 0.025
+//!    on 4 of 8 tuning bowls (0.111 → 0.188, 0.198 → 0.293, 0.132 → 0.253); on the fixed
+//!    batch at half the rates on 1. A larger capture (a car door) keeps the fresh
 //!    draws at the full rates ([`HumanProblem::refine_sample`]).
 
 use super::problem::{Draw, FullEval, Scratch};
