@@ -218,3 +218,31 @@ fn the_focused_batch_is_unbiased_and_near_the_edge() {
     assert!(n_pos < 2000.0, "the mask stratum fits its share ({n_pos})");
     assert!(near(&focused) > 2 * near(&uniform));
 }
+
+/// The residual's prior weighs against the reflection's size: on a reflection of `n` pixels
+/// with rays, more than `residual_ref_px`, by `residual_ref_px / n`; never more than
+/// `w_residual`, and not at all with `residual_ref_px` = 0; nothing else changes.
+#[test]
+fn the_residual_prior_weakens_on_a_large_reflection() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let (_, up) = true_root(&sc, &sim);
+    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let (n, _) = problem.pixels_with_rays();
+    assert!(n > 100, "{n} reflection pixels");
+    let cfg = HumanConfig::default();
+    for (ref_px, share) in [(n as f64 / 4.0, 0.25), (0.0, 1.0), (2.0 * n as f64, 1.0)] {
+        let c = HumanConfig {
+            residual_ref_px: ref_px,
+            ..cfg.clone()
+        };
+        let w = problem.prior_weighted(&c);
+        assert!(
+            (w.w_residual - share * cfg.w_residual).abs() < 1e-12,
+            "{ref_px}: {}",
+            w.w_residual
+        );
+        assert_eq!(w.w_prior, cfg.w_prior);
+        assert_eq!(w.residual_ref_px, ref_px);
+    }
+}

@@ -377,6 +377,7 @@ fn refine_as_fit(
     edge: &irmirror_capture::Image<f64>,
     seed: u64,
 ) -> Result<Option<HumanState>, EvalError> {
+    let hcfg = &problem.prior_weighted(hcfg);
     let thermal = problem.radiometric(hcfg).is_some();
     let polish = thermal && hcfg.radiometric.polish_iterations > 0;
     let sample = problem.refine_sample(hcfg, seed);

@@ -6,7 +6,8 @@
 //! slider, the other phenotype values at the mean adult: [`shaped_body`]), the pose latent `z`
 //! (32, the pose prior) and, beyond the paper, a per-joint **pose residual** `δ` (3 × 35: each
 //! body joint's decoded rotation turned by `exp(δ_j)` on its own axes, with a Gaussian prior
-//! `w_residual ‖δ‖²`; refinement only, the search moves the latent alone). The prior's latent
+//! `w_residual ‖δ‖²`, weaker on a reflection of more than `residual_ref_px` pixels:
+//! [`HumanProblem::prior_weighted`]; refinement only, the search moves the latent alone). The prior's latent
 //! cannot state a pose it was not trained on: on the tuning set its encoding of the true pose
 //! put the body 4–12 cm off per vertex and doubled the true body's data term (bowls median
 //! 0.15 → 0.37), while the exact pose on the mean adult's proportions stayed within 10 % of
@@ -120,8 +121,13 @@ pub struct HumanConfig {
     pub refine_lr_scale: f64,
     /// Weight of `‖z‖²`.
     pub w_prior: f64,
-    /// Weight of the residual's prior `Σ ‖δ_j‖²` (rad²).
+    /// Weight of the residual's prior `Σ ‖δ_j‖²` (rad²) on a reflection of at most
+    /// `residual_ref_px` pixels.
     pub w_residual: f64,
+    /// On a larger reflection the residual's prior weighs `w_residual × residual_ref_px / n`
+    /// for `n` reflection pixels with rays ([`HumanProblem::prior_weighted`]); 0: always
+    /// `w_residual`.
+    pub residual_ref_px: f64,
     /// Weight of the upright prior `1 − (R ẑ)·n` (people stand on the support plane's side:
     /// Anny's up should follow the plane normal; the pose bends the body, not the root).
     pub w_upright: f64,
@@ -161,6 +167,7 @@ impl HumanConfig {
             ("lr_latent", self.lr_latent),
             ("lr_residual", self.lr_residual),
             ("w_residual", self.w_residual),
+            ("residual_ref_px", self.residual_ref_px),
             ("active_margin_m", self.active_margin_m),
             ("refine_lr_scale", self.refine_lr_scale),
             (
@@ -233,6 +240,7 @@ impl Default for HumanConfig {
             refine_lr_scale: 0.5,
             w_prior: 2e-3,
             w_residual: 0.1,
+            residual_ref_px: 500.0,
             w_upright: 0.05,
             w_floor: 0.01,
             floor_sigma_m: 0.05,

@@ -111,6 +111,36 @@ fn distinct(a: &HumanState, b: &HumanState) -> bool {
     far || turned
 }
 
+/// The indices of the best `want` of `ranked` (best first) that are [`distinct`] from each
+/// other (in rank order), then the next best when there are too few distinct ones.
+fn best_distinct(ranked: &[HumanState], want: usize) -> Vec<usize> {
+    let mut chosen: Vec<usize> = Vec::with_capacity(want);
+    for (i, st) in ranked.iter().enumerate() {
+        if chosen.len() < want && chosen.iter().all(|&k| distinct(&ranked[k], st)) {
+            chosen.push(i);
+        }
+    }
+    for i in 0..ranked.len() {
+        if chosen.len() < want && !chosen.contains(&i) {
+            chosen.push(i);
+        }
+    }
+    chosen
+}
+
+/// [`best_distinct`] over scored states sorted best first: the search's cuts keep basins, not
+/// the same basin several times (a grid's neighbours and its pose modes at one place and
+/// facing fall into one basin and would fill the cut).
+fn take_distinct(scored: Vec<(f64, HumanState)>, keep: usize) -> Vec<HumanState> {
+    let states: Vec<HumanState> = scored.into_iter().map(|(_, st)| st).collect();
+    let chosen = best_distinct(&states, keep);
+    let mut states: Vec<Option<HumanState>> = states.into_iter().map(Some).collect();
+    chosen
+        .into_iter()
+        .filter_map(|i| states[i].take())
+        .collect()
+}
+
 /// Two root rotations facing more than 135° apart: a front/back pair.
 fn front_back(up: &Vector3<f64>, a: &Matrix3<f64>, b: &Matrix3<f64>) -> bool {
     facing_angle_deg(&up.normalize(), a, b) > 135.0
@@ -263,11 +293,8 @@ impl HumanProblem<'_> {
         scored.retain(|(l, _)| l.is_finite());
         tracing::debug!("screening: {:.2} s", t0.elapsed().as_secs_f64());
         scored.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut candidates: Vec<HumanState> = scored
-            .into_iter()
-            .take(s.keep_scored.max(1))
-            .map(|(_, st)| st)
-            .collect();
+        trace_states("screen", &scored);
+        let mut candidates = take_distinct(scored, s.keep_scored.max(1));
         for round in 0..s.rounds {
             // The rounds move the prior's poses only: a few steps are to fall into a basin,
             // and the residual's freedom would let a wrong one fit its outline as well.
@@ -304,6 +331,7 @@ impl HumanProblem<'_> {
                 .flatten()
                 .collect();
             scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+            trace_states(&format!("round{round}"), &scored);
             if let Some((best, st)) = scored.first() {
                 tracing::debug!(
                     "search round {round} ({:.2} s): {} candidates, best loss {best:.3} at {:.2} m from the objects, turned {:.0}° from facing them",
@@ -322,7 +350,7 @@ impl HumanProblem<'_> {
             } else {
                 scored.len().div_ceil(2)
             };
-            candidates = scored.into_iter().take(keep).map(|(_, st)| st).collect();
+            candidates = take_distinct(scored, keep);
         }
         Ok(candidates)
     }
@@ -344,19 +372,9 @@ impl HumanProblem<'_> {
             cfg.inits
         }
         .max(1);
-        let mut chosen: Vec<usize> = Vec::with_capacity(want);
-        for (i, st) in ranked.iter().enumerate() {
-            if chosen.len() < want && chosen.iter().all(|&k| distinct(&ranked[k], st)) {
-                chosen.push(i);
-            }
-        }
-        // Too few distinct basins: fill with the next best.
-        for i in 0..ranked.len() {
-            if chosen.len() < want && !chosen.contains(&i) {
-                chosen.push(i);
-            }
-        }
-        let survivors = chosen.into_iter().map(|i| ranked[i].clone());
+        let survivors = best_distinct(&ranked, want)
+            .into_iter()
+            .map(|i| ranked[i].clone());
         let mut out = Vec::with_capacity(cfg.inits);
         for st in survivors {
             if flips && out.len() + 1 < cfg.inits.max(2) {
@@ -371,6 +389,22 @@ impl HumanProblem<'_> {
             }
         }
         Ok(out)
+    }
+}
+
+/// Logs scored states (trace level): loss, root, facing (Anny's −Y in the depth frame).
+fn trace_states(phase: &str, scored: &[(f64, HumanState)]) {
+    for (l, st) in scored {
+        let f = -(st.rotation * Vector3::y());
+        tracing::trace!(
+            "cand {phase} {l:.4} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3}",
+            st.translation.x,
+            st.translation.y,
+            st.translation.z,
+            f.x,
+            f.y,
+            f.z
+        );
     }
 }
 
@@ -465,6 +499,7 @@ pub fn fit_human(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<(HumanFit, Vec<HumanState>), ReconError> {
     cfg.check()?;
+    let cfg = &problem.prior_weighted(cfg);
     let s = &cfg.search;
     let candidates = s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len();
     // With a polish, the search and refinement fit the mask and the thermal rise comes last.
@@ -578,4 +613,43 @@ pub fn fit_human(
         },
         states,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state(x: f64, yaw_deg: f64) -> HumanState {
+        HumanState {
+            translation: Vector3::new(x, 0.0, 0.0),
+            rotation: axis_angle_to_matrix(&(Vector3::z() * yaw_deg.to_radians())),
+            height: 0.5,
+            latent: Vec::new(),
+            residual: Vec::new(),
+        }
+    }
+
+    /// The cuts keep one state per basin: neighbours (10 cm, 20° apart) give way to the next
+    /// distinct state however far down the ranking it is, and too few basins are filled with
+    /// the next best in rank order.
+    #[test]
+    fn the_cuts_keep_distinct_basins() {
+        let ranked = [
+            state(0.0, 0.0),
+            state(0.1, 0.0),
+            state(0.0, 20.0),
+            state(1.0, 0.0),
+            state(0.0, 180.0),
+        ];
+        assert_eq!(best_distinct(&ranked, 3), vec![0, 3, 4]);
+        assert_eq!(best_distinct(&ranked, 4), vec![0, 3, 4, 1]);
+        let scored: Vec<(f64, HumanState)> = ranked
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (i as f64, s.clone()))
+            .collect();
+        let kept = take_distinct(scored, 2);
+        assert_eq!(kept.len(), 2);
+        assert_eq!(kept[1].translation, ranked[3].translation);
+    }
 }
