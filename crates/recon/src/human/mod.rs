@@ -6,8 +6,8 @@
 //! slider, the other phenotype values at the mean adult: [`shaped_body`]), the pose latent `z`
 //! (32, the pose prior) and, beyond the paper, a per-joint **pose residual** `δ` (3 × 35: each
 //! body joint's decoded rotation turned by `exp(δ_j)` on its own axes, with a Gaussian prior
-//! `w_residual ‖δ‖²`, weaker on a reflection of more than `residual_ref_px` pixels:
-//! [`HumanProblem::prior_weighted`]; refinement only, the search moves the latent alone). The prior's latent
+//! `w_residual ‖δ‖²`, optionally weaker on a large reflection: `residual_ref_px`; refinement
+//! only, the search moves the latent alone). The prior's latent
 //! cannot state a pose it was not trained on: on the tuning set its encoding of the true pose
 //! put the body 4–12 cm off per vertex and doubled the true body's data term (bowls median
 //! 0.15 → 0.37), while the exact pose on the mean adult's proportions stayed within 10 % of
@@ -121,12 +121,12 @@ pub struct HumanConfig {
     pub refine_lr_scale: f64,
     /// Weight of `‖z‖²`.
     pub w_prior: f64,
-    /// Weight of the residual's prior `Σ ‖δ_j‖²` (rad²) on a reflection of at most
-    /// `residual_ref_px` pixels.
+    /// Weight of the residual's prior `Σ ‖δ_j‖²` (rad²).
     pub w_residual: f64,
-    /// On a larger reflection the residual's prior weighs `w_residual × residual_ref_px / n`
-    /// for `n` reflection pixels with rays ([`HumanProblem::prior_weighted`]); 0: always
-    /// `w_residual`.
+    /// When > 0, on a reflection of `n` > `residual_ref_px` pixels with rays the residual's
+    /// prior weighs `w_residual × residual_ref_px / n` ([`HumanProblem::prior_weighted`]).
+    /// Off (0) by default: at 500 it helped the tuning cars and not the held-out ones (README,
+    /// "Tenth run").
     pub residual_ref_px: f64,
     /// Weight of the upright prior `1 − (R ẑ)·n` (people stand on the support plane's side:
     /// Anny's up should follow the plane normal; the pose bends the body, not the root).
@@ -240,7 +240,7 @@ impl Default for HumanConfig {
             refine_lr_scale: 0.5,
             w_prior: 2e-3,
             w_residual: 0.1,
-            residual_ref_px: 500.0,
+            residual_ref_px: 0.0,
             w_upright: 0.05,
             w_floor: 0.01,
             floor_sigma_m: 0.05,

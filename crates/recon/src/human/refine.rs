@@ -203,12 +203,13 @@ impl HumanProblem<'_> {
             })
     }
 
-    /// `cfg` with the residual's prior weighed against this capture's reflection: the data
-    /// term is a mean over pixels, a likelihood a sum, so the prior's share should fall as
-    /// the reflection grows — `w_residual × min(1, residual_ref_px / n)`, `n` the reflection's
-    /// pixels with rays. Tuning cars (400–12,500 pixels) at a constant 0.02 instead of 0.1:
-    /// 2-D keypoints 0.245 → 0.167, root 0.23 → 0.18 m; tuning bowls (140–630 pixels) lost at
-    /// 0.02 (2-D 0.26 → 0.33, successes 5 → 3), mugs too (per-vertex 0.34 → 0.41 m).
+    /// `cfg` with the residual's prior weighed against this capture's reflection (with
+    /// `residual_ref_px` > 0): the data term is a mean over pixels, a likelihood a sum, so
+    /// the prior's share should fall as the reflection grows — `w_residual × min(1,
+    /// residual_ref_px / n)`, `n` the reflection's pixels with rays. Tuning cars (400–12,500
+    /// pixels) at a constant 0.02 instead of 0.1: 2-D keypoints 0.245 → 0.167, root 0.23 →
+    /// 0.18 m; tuning bowls and mugs (30–870 pixels) lost at 0.02; the held-out cars lost at
+    /// `residual_ref_px` 500 (root median 0.40 → 0.50 m): off by default.
     pub fn prior_weighted(&self, cfg: &HumanConfig) -> HumanConfig {
         let (mask, _) = self.pixels_with_rays();
         let share = if cfg.residual_ref_px > 0.0 && mask > 0 {
