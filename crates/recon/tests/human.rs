@@ -497,8 +497,8 @@ fn perturbed_starts_report() {
 fn search_candidates_cover_every_facing() {
     use irmirror_recon::human::*;
     let (sc, sim, rays) = car_capture(1);
-    let (_, up) = true_root(&sc, &sim);
-    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let problem = truth_problem(&sc, &sim, &rays);
+    let up = problem.up;
     let cfg = HumanConfig::default();
     let c = problem.candidates(&cfg, 3).unwrap();
     let s = &cfg.search;
@@ -692,8 +692,7 @@ fn the_active_set_holds_every_ray_the_body_reaches() {
 fn impossible_stage2_settings_are_a_clear_error() {
     use irmirror_recon::human::*;
     let (sc, sim, rays) = car_capture(1);
-    let (_, up) = true_root(&sc, &sim);
-    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let problem = truth_problem(&sc, &sim, &rays);
     let mut polish = HumanConfig::default();
     polish.radiometric.polish_lr_scale = -1.0;
     let margin = HumanConfig {
@@ -704,10 +703,15 @@ fn impossible_stage2_settings_are_a_clear_error() {
         sigma_m2: [3e-4, 0.0],
         ..HumanConfig::default()
     };
+    let reference = HumanConfig {
+        residual_ref_px: -500.0,
+        ..HumanConfig::default()
+    };
     for (cfg, field) in [
         (polish, "polish_lr_scale = -1"),
         (margin, "active_margin_m = NaN"),
         (blur, "sigma_m2 holds 0"),
+        (reference, "residual_ref_px = -500"),
     ] {
         let Err(err) = fit_human(&problem, &cfg, 0, &|_| {}) else {
             panic!("{field}: not refused");

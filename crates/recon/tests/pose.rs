@@ -170,8 +170,7 @@ fn the_refinement_descends_its_batch_from_the_truth() {
 fn the_focused_batch_is_unbiased_and_near_the_edge() {
     use irmirror_recon::human::*;
     let (sc, sim, rays) = car_capture(1);
-    let (_, up) = true_root(&sc, &sim);
-    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let problem = truth_problem(&sc, &sim, &rays);
     let all = problem.targets();
     let n_neg = all.iter().filter(|&&x| x < 0.5).count() as f64;
     let n_pos = all.len() as f64 - n_neg;
@@ -226,8 +225,7 @@ fn the_focused_batch_is_unbiased_and_near_the_edge() {
 fn the_residual_prior_weakens_on_a_large_reflection() {
     use irmirror_recon::human::*;
     let (sc, sim, rays) = car_capture(1);
-    let (_, up) = true_root(&sc, &sim);
-    let problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let problem = truth_problem(&sc, &sim, &rays);
     let (n, _) = problem.pixels_with_rays();
     assert!(n > 100, "{n} reflection pixels");
     let cfg = HumanConfig::default();

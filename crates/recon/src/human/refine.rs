@@ -211,11 +211,13 @@ impl HumanProblem<'_> {
     /// 0.18 m; tuning bowls and mugs (30–870 pixels) lost at 0.02; the held-out cars lost at
     /// `residual_ref_px` 500 (root median 0.40 → 0.50 m): off by default.
     pub fn prior_weighted(&self, cfg: &HumanConfig) -> HumanConfig {
-        let (mask, _) = self.pixels_with_rays();
-        let share = if cfg.residual_ref_px > 0.0 && mask > 0 {
-            (cfg.residual_ref_px / mask as f64).min(1.0)
-        } else {
-            1.0
+        let mask = match cfg.residual_ref_px > 0.0 {
+            true => self.pixels_with_rays().0,
+            false => 0,
+        };
+        let share = match mask {
+            0 => 1.0,
+            n => (cfg.residual_ref_px / n as f64).min(1.0),
         };
         HumanConfig {
             w_residual: cfg.w_residual * share,

@@ -162,6 +162,16 @@ pub fn problem_for<'a>(
     }
 }
 
+/// [`problem_for`] with the simulator's reflection mask, the body's true up and no floor.
+pub fn truth_problem<'a>(
+    sc: &SceneFile,
+    sim: &'a irmirror_sim::Simulation,
+    rays: &'a ReflectedRays<f64>,
+) -> irmirror_recon::human::HumanProblem<'a> {
+    let (_, up) = true_root(sc, sim);
+    problem_for(sim, rays, &sim.reflection_mask, up, None)
+}
+
 /// The floor under the true body (its lowest vertex on it), as the pipeline finds the ground
 /// under a car.
 pub fn true_floor(
