@@ -49,9 +49,11 @@ pub enum BenchCommand {
         /// Ignore the capture's object masks and segment the depth image instead.
         #[arg(long)]
         segment: bool,
-        /// Shape families of the simulated objects.
-        #[arg(long, value_enum, default_value = "simple")]
-        shapes: irmirror_sim::presets::Shapes,
+        /// Shape families of the simulated objects; several (comma-separated, e.g.
+        /// `family,unseen`) run the same seeds once per set and summarise each apart: the
+        /// learned priors in family (`family`) and out of family (`unseen`).
+        #[arg(long, value_enum, value_delimiter = ',', default_value = "simple")]
+        shapes: Vec<irmirror_sim::presets::Shapes>,
         /// The prior stage 1 fits: the two-parameter family, or then the learned DeepSDF prior.
         #[arg(long, value_enum, default_value = "simple")]
         prior: PriorArg,
@@ -126,7 +128,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             segment,
             shapes,
             prior,
-        } => crate::bench_objects::run(regime, shapes, prior.into(), seeds, segment),
+        } => crate::bench_objects::run(regime, &shapes, prior.into(), seeds, segment),
         BenchCommand::Regimes { seeds, first, png } => {
             crate::bench_regimes::run(first, seeds, &png)
         }

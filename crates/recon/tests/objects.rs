@@ -411,7 +411,7 @@ fn learned_prior_fits_family_shapes() {
     let mut sc = scene(seed);
     let mut rng = irmirror_geom::rng::seeded(seed, 2000);
     for o in &mut sc.objects {
-        (o.shape, o.scale_m) = o.shape.family_like(o.scale_m, &mut rng).unwrap();
+        (o.shape, o.scale_m) = o.shape.replaced(o.scale_m, false, &mut rng).unwrap();
     }
     let dir = std::env::temp_dir().join(format!("irmirror-objects-{}-learned", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();

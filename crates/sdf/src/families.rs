@@ -97,13 +97,13 @@ pub enum FamilyShape {
     Car(CarParams),
 }
 
-fn sd_box2(p: Vector2<f64>, centre: Vector2<f64>, half: Vector2<f64>) -> f64 {
+pub(crate) fn sd_box2(p: Vector2<f64>, centre: Vector2<f64>, half: Vector2<f64>) -> f64 {
     let q = (p - centre).abs() - half;
     Vector2::new(q.x.max(0.0), q.y.max(0.0)).norm() + q.x.max(q.y).min(0.0)
 }
 
 /// Exact distance to an open polyline.
-fn polyline_distance(p: Vector2<f64>, pts: &[Vector2<f64>]) -> f64 {
+pub(crate) fn polyline_distance(p: Vector2<f64>, pts: &[Vector2<f64>]) -> f64 {
     let mut best = f64::INFINITY;
     for w in pts.windows(2) {
         let e = w[1] - w[0];
@@ -114,7 +114,7 @@ fn polyline_distance(p: Vector2<f64>, pts: &[Vector2<f64>]) -> f64 {
 }
 
 /// Exact signed distance to a simple closed polygon (Quilez), negative inside.
-fn polygon_distance(p: Vector2<f64>, v: &[Vector2<f64>]) -> f64 {
+pub(crate) fn polygon_distance(p: Vector2<f64>, v: &[Vector2<f64>]) -> f64 {
     let n = v.len();
     let mut d = (p - v[0]).norm_squared();
     let mut s = 1.0;
@@ -133,12 +133,12 @@ fn polygon_distance(p: Vector2<f64>, v: &[Vector2<f64>]) -> f64 {
 }
 
 /// Polynomial smooth minimum (radius k): keeps unions smooth, as mirrors need.
-fn smin(a: f64, b: f64, k: f64) -> f64 {
+pub(crate) fn smin(a: f64, b: f64, k: f64) -> f64 {
     let h = (k - (a - b).abs()).max(0.0) / k;
     a.min(b) - h * h * k * 0.25
 }
 
-fn uniform(rng: &mut impl Rng, lo: f64, hi: f64) -> f64 {
+pub(crate) fn uniform(rng: &mut impl Rng, lo: f64, hi: f64) -> f64 {
     rng.random_range(lo..=hi)
 }
 
@@ -330,21 +330,31 @@ impl FamilyShape {
     /// tetrahedra over a cube around the padded bounding box, `resolution` cells per side.
     pub fn mesh(&self, resolution: usize) -> TriMesh {
         let prepared = self.prepare();
-        let (c, k) = (prepared.centre, prepared.k);
-        let (lo, hi) = self.raw_bounds();
-        let pad = Vector3::repeat(0.03 * k.max(1.0));
-        // (Kept in this exact arithmetic: the shipped priors were trained on these grids.)
-        let (lo, hi) = ((lo - c) / k - pad / k, (hi - c) / k + pad / k);
-        let cell = (hi - lo).max() / resolution as f64;
-        let half = Vector3::repeat(cell * resolution as f64 / 2.0);
-        let centre = (lo + hi) / 2.0;
-        irmirror_geom::isosurface::isosurface(
+        mesh_in_bounds(
             |q| prepared.distance(q),
-            centre - half,
-            centre + half,
+            self.raw_bounds(),
+            (prepared.centre, prepared.k),
             resolution,
         )
     }
+}
+
+/// Marching tetrahedra over a cube around the padded raw bounds `(lo, hi)`, mapped to the
+/// normalised frame by `(centre, k)` (raw = centre + k · normalised); `distance` in the
+/// normalised frame.
+pub(crate) fn mesh_in_bounds(
+    distance: impl Fn(&Vector3<f64>) -> f64 + Sync,
+    (lo, hi): (Vector3<f64>, Vector3<f64>),
+    (c, k): (Vector3<f64>, f64),
+    resolution: usize,
+) -> TriMesh {
+    let pad = Vector3::repeat(0.03 * k.max(1.0));
+    // (Kept in this exact arithmetic: the shipped priors were trained on these grids.)
+    let (lo, hi) = ((lo - c) / k - pad / k, (hi - c) / k + pad / k);
+    let cell = (hi - lo).max() / resolution as f64;
+    let half = Vector3::repeat(cell * resolution as f64 / 2.0);
+    let centre = (lo + hi) / 2.0;
+    irmirror_geom::isosurface::isosurface(distance, centre - half, centre + half, resolution)
 }
 
 /// A family member ready for many distance queries (meshing evaluates millions).

@@ -23,11 +23,13 @@ pub mod net;
 pub mod placed;
 pub mod quality;
 pub mod train;
+pub mod unseen;
 mod var_adam;
 
 pub use families::{Category, FamilyShape};
 pub use mesh_sdf::{MeshSdf, SdfSamples};
 pub use net::{LatentSdf, SdfNet};
+pub use unseen::UnseenShape;
 
 /// Errors of the shape priors.
 #[derive(Debug, thiserror::Error)]

@@ -158,6 +158,10 @@ pub enum Shapes {
     /// The richer procedural families the learned object priors were trained on
     /// (`irmirror_sdf::families`), each object about the size the simple preset would draw.
     Family,
+    /// Shapes from outside those families (`irmirror_sdf::unseen`: polygonal and beaded
+    /// bowls, barrel mugs with strap or ring handles, coupés, vans and pickups), sized the same
+    /// way: what the fits are measured on out of family.
+    Unseen,
 }
 
 /// Presets redraw their scene (up to this many times) until the person's reflection covers at
@@ -237,13 +241,15 @@ fn draw_temperatures(person: &mut crate::scene::Person, seed: u64, attempt: u64)
     person.hair_c = Some(draw(Hair));
 }
 
-/// With [`Shapes::Family`], replaces each simple shape by a family member of about its size.
+/// With [`Shapes::Family`] or [`Shapes::Unseen`], replaces each simple shape by one of about
+/// its size from those shapes.
 fn family_shapes(scene: &mut SceneFile, shapes: Shapes, seed: u64, attempt: u64) {
-    if shapes == Shapes::Family {
+    if shapes != Shapes::Simple {
         // Its own stream: the rest of the scene is the simple preset's, draw for draw.
         let mut rng = irmirror_geom::rng::seeded(seed, 2000 + attempt);
+        let unseen = shapes == Shapes::Unseen;
         for o in &mut scene.objects {
-            if let Some((shape, scale_m)) = o.shape.family_like(o.scale_m, &mut rng) {
+            if let Some((shape, scale_m)) = o.shape.replaced(o.scale_m, unseen, &mut rng) {
                 (o.shape, o.scale_m) = (shape, scale_m);
             }
         }

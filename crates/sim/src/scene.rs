@@ -10,7 +10,7 @@ use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_geom::transform::RigidFile;
 use irmirror_geom::{PinholeCamera, Rigid3};
 use irmirror_render::sdf::Sdf;
-use irmirror_sdf::{Category, FamilyShape};
+use irmirror_sdf::{Category, FamilyShape, UnseenShape};
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -83,18 +83,21 @@ pub struct Table {
 
 /// An object's shape: a member of the renderer's two-parameter families, or of the richer
 /// procedural families the learned object priors were trained on (`irmirror_sdf::families`:
-/// tapered mugs with varied handles, flared bowls with feet, sedans to SUVs). In a scene file both
-/// are a table with a `category`; the parameter names tell them apart.
+/// tapered mugs with varied handles, flared bowls with feet, sedans to SUVs), or from outside
+/// them (`irmirror_sdf::unseen`). In a scene file each is a table with a `category`; the
+/// parameter names tell them apart.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(
     untagged,
-    expecting = "an object shape: `category` and its parameters (bowl: cut, wall; mug: aspect, wall; car: cabin, height; or the parameters of an irmirror_sdf::families shape)"
+    expecting = "an object shape: `category` and its parameters (bowl: cut, wall; mug: aspect, wall; car: cabin, height; or the parameters of an irmirror_sdf::families or irmirror_sdf::unseen shape)"
 )]
 pub enum ObjectShape {
     /// [`Shape`] (normalised to the unit sphere).
     Simple(Shape),
     /// [`FamilyShape`] (normalised: bounding-box half-diagonal 0.9).
     Family(FamilyShape),
+    /// [`UnseenShape`]: a shape from outside the priors' families (normalised the same way).
+    Unseen(UnseenShape),
 }
 
 impl From<Shape> for ObjectShape {
@@ -109,6 +112,7 @@ impl ObjectShape {
         match self {
             ObjectShape::Simple(s) => s.category(),
             ObjectShape::Family(f) => f.category(),
+            ObjectShape::Unseen(u) => u.category(),
         }
     }
 
@@ -117,6 +121,7 @@ impl ObjectShape {
         match self {
             ObjectShape::Simple(s) => s.sdf(),
             ObjectShape::Family(f) => Arc::new(f.prepare()),
+            ObjectShape::Unseen(u) => Arc::new(u.prepare()),
         }
     }
 
@@ -129,13 +134,24 @@ impl ObjectShape {
                 let (centre, k) = f.normalisation();
                 (lo.y - centre.y) / k
             }
+            ObjectShape::Unseen(u) => {
+                let (lo, _) = u.raw_bounds();
+                let (centre, k) = u.normalisation();
+                (lo.y - centre.y) / k
+            }
         }
     }
 
-    /// A family member of the same category and about the same metric size (widest horizontal
-    /// radius; a car's length), drawn from the family's documented ranges; returns the shape and
-    /// its `scale_m`. `None` for categories without a family (the sphere).
-    pub fn family_like(&self, scale_m: f64, rng: &mut impl Rng) -> Option<(ObjectShape, f64)> {
+    /// A shape of the same category and about the same metric size (widest horizontal radius;
+    /// a car's length), drawn from the priors' families (`unseen` false) or from the
+    /// out-of-family generator (`irmirror_sdf::unseen`, true); returns the shape and its
+    /// `scale_m`. `None` for categories without either (the sphere).
+    pub fn replaced(
+        &self,
+        scale_m: f64,
+        unseen: bool,
+        rng: &mut impl Rng,
+    ) -> Option<(ObjectShape, f64)> {
         let ObjectShape::Simple(simple) = *self else {
             return Some((*self, scale_m));
         };
@@ -149,15 +165,28 @@ impl ObjectShape {
             ),
             Shape::Car { .. } => (Category::Car, 0.95 * scale_m),
         };
-        let family = FamilyShape::sample(category, rng).ok()?;
-        let (_, k) = family.normalisation();
-        // The family's widest radius (half length) in raw units.
-        let raw_half = match family {
-            FamilyShape::Bowl(b) => 1.0 + b.flare + 0.5 * b.wall,
-            FamilyShape::Mug(m) => 1.0 + m.taper.max(0.0),
-            FamilyShape::Car(_) => 1.0,
+        // `k` and the widest radius (half length) in raw units.
+        let (shape, k, raw_half) = if unseen {
+            let u = UnseenShape::sample(category, rng).ok()?;
+            (
+                ObjectShape::Unseen(u),
+                u.normalisation().1,
+                u.raw_half_size(),
+            )
+        } else {
+            let family = FamilyShape::sample(category, rng).ok()?;
+            let raw_half = match family {
+                FamilyShape::Bowl(b) => 1.0 + b.flare + 0.5 * b.wall,
+                FamilyShape::Mug(m) => 1.0 + m.taper.max(0.0),
+                FamilyShape::Car(_) => 1.0,
+            };
+            (
+                ObjectShape::Family(family),
+                family.normalisation().1,
+                raw_half,
+            )
         };
-        Some((ObjectShape::Family(family), half_m / raw_half * k))
+        Some((shape, half_m / raw_half * k))
     }
 }
 

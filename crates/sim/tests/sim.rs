@@ -138,29 +138,34 @@ fn same_seed_same_capture_and_noise_follows_netd() {
     );
 }
 
-/// Family shapes in a scene file: they round-trip through TOML next to the simple shapes, stand
-/// on their base, and a shape that is neither is a clear error.
+/// Family and out-of-family shapes in a scene file: they round-trip through TOML next to the
+/// simple shapes, stand on their base, and a shape that is neither is a clear error.
 #[test]
 fn family_shapes_round_trip_and_bad_shapes_are_named() {
     use irmirror_sim::scene::ObjectShape;
-    let mut s = small_scene();
-    let mut rng = irmirror_geom::rng::seeded(4, 2000);
-    let (family, scale) = s.objects[1]
-        .shape
-        .family_like(s.objects[1].scale_m, &mut rng)
-        .unwrap();
-    assert!(
-        matches!(family, ObjectShape::Family(_))
-            && family.category() == irmirror_geom::Category::Mug
-    );
-    s.objects[1].shape = family;
-    s.objects[1].scale_m = scale;
-    let text = toml::to_string(&s).unwrap();
-    let back: irmirror_sim::SceneFile = toml::from_str(&text).unwrap();
-    assert_eq!(back, s, "simple and family shapes survive TOML");
-    // The base point is on the surface.
-    let sdf = family.sdf();
-    assert!(sdf.distance(&Vector3::new(0.0, family.base_y(), 0.0)).abs() < 0.02);
+    let mut text = String::new();
+    for unseen in [false, true] {
+        let mut s = small_scene();
+        let mut rng = irmirror_geom::rng::seeded(4, 2000);
+        let (family, scale) = s.objects[1]
+            .shape
+            .replaced(s.objects[1].scale_m, unseen, &mut rng)
+            .unwrap();
+        assert!(
+            matches!(
+                (unseen, family),
+                (false, ObjectShape::Family(_)) | (true, ObjectShape::Unseen(_))
+            ) && family.category() == irmirror_geom::Category::Mug
+        );
+        s.objects[1].shape = family;
+        s.objects[1].scale_m = scale;
+        text = toml::to_string(&s).unwrap();
+        let back: irmirror_sim::SceneFile = toml::from_str(&text).unwrap();
+        assert_eq!(back, s, "simple and family shapes survive TOML");
+        // The base point is on the surface.
+        let sdf = family.sdf();
+        assert!(sdf.distance(&Vector3::new(0.0, family.base_y(), 0.0)).abs() < 0.02);
+    }
     // A bowl with parameters of neither kind.
     let bad = text.replacen("cut = ", "depthh = ", 1);
     let err = toml::from_str::<irmirror_sim::SceneFile>(&bad)

@@ -545,7 +545,7 @@ fn true_objects(p: &Prepared, fitted: &Objects) -> Option<Objects> {
                 loss_curve: vec![],
                 learned: None,
             }),
-            ObjectShape::Family(_) => None,
+            ObjectShape::Family(_) | ObjectShape::Unseen(_) => None,
         })
         .collect::<Option<Vec<_>>>()?;
     Some(Objects {
