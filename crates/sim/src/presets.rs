@@ -152,7 +152,7 @@ fn draw_regime(
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Shapes {
-    /// The renderer's two-parameter shapes ([`crate::shapes::Shape`]).
+    /// The renderer's two-parameter shapes (`irmirror_render::shapes::Shape`).
     #[default]
     Simple,
     /// The richer procedural families the learned object priors were trained on
