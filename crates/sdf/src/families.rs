@@ -132,6 +132,33 @@ pub(crate) fn polygon_distance(p: Vector2<f64>, v: &[Vector2<f64>]) -> f64 {
     s * d.sqrt()
 }
 
+/// A car's wheel: a rounded disc about the Z axis through `hub` (x, y), centred at
+/// `|z| = hub_z`, put in after its arch (a cylinder `arch_margin` wider, where
+/// `|z| > arch_z`) is cut out of the body.
+pub(crate) struct Wheel {
+    pub hub: Vector2<f64>,
+    pub radius: f64,
+    pub arch_margin: f64,
+    pub arch_z: f64,
+    pub hub_z: f64,
+    pub half_thickness: f64,
+    pub rounding: f64,
+}
+
+impl Wheel {
+    /// `body` (a signed distance at `p`) with the arch cut and the wheel added.
+    pub(crate) fn fitted(&self, body: f64, p: &Vector3<f64>) -> f64 {
+        let r = (Vector2::new(p.x, p.y) - self.hub).norm();
+        let arch = (r - (self.radius + self.arch_margin)).max(self.arch_z - p.z.abs());
+        let wheel = sd_box2(
+            Vector2::new(r, p.z.abs()),
+            Vector2::new(0.0, self.hub_z),
+            Vector2::new(self.radius - self.rounding, self.half_thickness),
+        ) - self.rounding;
+        body.max(-arch).min(wheel)
+    }
+}
+
 /// Polynomial smooth minimum (radius k): keeps unions smooth, as mirrors need.
 pub(crate) fn smin(a: f64, b: f64, k: f64) -> f64 {
     let h = (k - (a - b).abs()).max(0.0) / k;
@@ -403,17 +430,16 @@ impl PreparedShape {
                     + Vector2::new(w.x.max(0.0), w.y.max(0.0)).norm()
                     - r_edge;
                 for xw in [c.wheelbase, -c.wheelbase] {
-                    let centre = Vector2::new(xw, c.wheel);
-                    let arch = ((Vector2::new(p.x, p.y) - centre).norm() - (c.wheel + 0.03))
-                        .max(c.half_width - 0.14 - p.z.abs());
-                    body = body.max(-arch);
-                    let zc = c.half_width - 0.08;
-                    let wheel = sd_box2(
-                        Vector2::new((Vector2::new(p.x, p.y) - centre).norm(), p.z.abs()),
-                        Vector2::new(0.0, zc),
-                        Vector2::new(c.wheel - 0.02, 0.06),
-                    ) - 0.02;
-                    body = body.min(wheel);
+                    let wheel = Wheel {
+                        hub: Vector2::new(xw, c.wheel),
+                        radius: c.wheel,
+                        arch_margin: 0.03,
+                        arch_z: c.half_width - 0.14,
+                        hub_z: c.half_width - 0.08,
+                        half_thickness: 0.06,
+                        rounding: 0.02,
+                    };
+                    body = wheel.fitted(body, p);
                 }
                 body
             }

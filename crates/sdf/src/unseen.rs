@@ -16,8 +16,8 @@
 
 use crate::SdfError;
 use crate::families::{
-    Category, NORMALISED_RADIUS, mesh_in_bounds, polygon_distance, polyline_distance, sd_box2,
-    smin, uniform,
+    Category, NORMALISED_RADIUS, Wheel, mesh_in_bounds, polygon_distance, polyline_distance,
+    sd_box2, smin, uniform,
 };
 use irmirror_geom::TriMesh;
 use irmirror_render::sdf::Sdf;
@@ -531,19 +531,18 @@ impl PreparedUnseen {
                     + Vector2::new(w.x.max(0.0), w.y.max(0.0)).norm()
                     - r_edge)
                     / (1.0 + cos).sqrt();
-                let xy = Vector2::new(p.x, p.y);
                 for xw in [c.axle, -c.axle] {
-                    let axle = Vector2::new(xw, c.wheel_radius);
                     let hw = c.half_width_at(xw, c.wheel_radius);
-                    let arch =
-                        ((xy - axle).norm() - (c.wheel_radius + 0.035)).max(hw - 0.15 - p.z.abs());
-                    body = body.max(-arch);
-                    let wheel = sd_box2(
-                        Vector2::new((xy - axle).norm(), p.z.abs()),
-                        Vector2::new(0.0, hw - 0.09),
-                        Vector2::new(c.wheel_radius - 0.025, 0.065),
-                    ) - 0.025;
-                    body = body.min(wheel);
+                    let wheel = Wheel {
+                        hub: Vector2::new(xw, c.wheel_radius),
+                        radius: c.wheel_radius,
+                        arch_margin: 0.035,
+                        arch_z: hw - 0.15,
+                        hub_z: hw - 0.09,
+                        half_thickness: 0.065,
+                        rounding: 0.025,
+                    };
+                    body = wheel.fitted(body, p);
                 }
                 body
             }
