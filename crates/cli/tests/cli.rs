@@ -324,7 +324,9 @@ fn benches_print_their_tables() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
-        out.contains("| 0 | bowl |") && out.contains("| 0 | mug |") && out.contains("| mug | 1 |"),
+        out.contains("| 0 | two-parameter | bowl |")
+            && out.contains("| 0 | two-parameter | mug |")
+            && out.contains("| mug | two-parameter | 1 |"),
         "{out}"
     );
     // Its mug shows three depth pixels of its handle: counted as seen, so its rotation is summarised.
