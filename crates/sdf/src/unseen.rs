@@ -236,8 +236,9 @@ impl UnseenMug {
         poly
     }
 
-    /// Distance to the handle's centre line in the XY plane, and its outer reach in x.
-    fn handle_line(&self, p: Vector2<f64>) -> f64 {
+    /// The handle's centre line in the XY plane (computed once per shape: distance queries
+    /// only measure to it).
+    fn handle_line(&self) -> HandleLine {
         let h = self.cup_height;
         let top = self.strap_top * h;
         match self.handle {
@@ -251,31 +252,57 @@ impl UnseenMug {
                     - self.strap_thickness;
                 let x1 = self.radius(bottom).max(self.radius(top)) + self.strap_reach;
                 let half = Vector2::new((x1 - x0) / 2.0, (top - bottom) / 2.0);
-                let rc = 0.45 * half.x.min(half.y);
-                let centre = Vector2::new((x0 + x1) / 2.0, (top + bottom) / 2.0);
-                (sd_box2(p, centre, half - Vector2::repeat(rc)) - rc).abs()
+                HandleLine::Loop {
+                    centre: Vector2::new((x0 + x1) / 2.0, (top + bottom) / 2.0),
+                    half,
+                    corner: 0.45 * half.x.min(half.y),
+                }
             }
             HandleKind::Ring => {
                 let r = 0.5 * self.strap_reach + 0.15;
-                let centre =
-                    Vector2::new(self.radius(top - r) + 0.5 * self.strap_reach - 0.1, top - r);
-                ((p - centre).norm() - r).abs()
+                HandleLine::Ring {
+                    centre: Vector2::new(
+                        self.radius(top - r) + 0.5 * self.strap_reach - 0.1,
+                        top - r,
+                    ),
+                    radius: r,
+                }
             }
         }
     }
+}
 
-    /// Largest x the handle reaches (raw units).
-    fn handle_reach_x(&self) -> f64 {
-        let h = self.cup_height;
-        let top = self.strap_top * h;
-        match self.handle {
-            HandleKind::Loop => {
-                self.radius(self.strap_bottom * h).max(self.radius(top)) + self.strap_reach
-            }
-            HandleKind::Ring => {
-                let r = 0.5 * self.strap_reach + 0.15;
-                self.radius(top - r) + 0.5 * self.strap_reach - 0.1 + r
-            }
+/// A mug handle's centre line in the XY plane.
+#[derive(Clone, Copy, Debug)]
+enum HandleLine {
+    /// A rounded rectangle.
+    Loop {
+        centre: Vector2<f64>,
+        half: Vector2<f64>,
+        corner: f64,
+    },
+    /// A circle.
+    Ring { centre: Vector2<f64>, radius: f64 },
+}
+
+impl HandleLine {
+    /// Unsigned distance to the line.
+    fn distance(&self, p: Vector2<f64>) -> f64 {
+        match *self {
+            HandleLine::Loop {
+                centre,
+                half,
+                corner,
+            } => (sd_box2(p, centre, half - Vector2::repeat(corner)) - corner).abs(),
+            HandleLine::Ring { centre, radius } => ((p - centre).norm() - radius).abs(),
+        }
+    }
+
+    /// Largest x of the line.
+    fn reach_x(&self) -> f64 {
+        match *self {
+            HandleLine::Loop { centre, half, .. } => centre.x + half.x,
+            HandleLine::Ring { centre, radius } => centre.x + radius,
         }
     }
 }
@@ -418,7 +445,7 @@ impl UnseenShape {
                     .map(|i| m.radius(m.cup_height * f64::from(i) / 32.0))
                     .fold(1.0, f64::max)
                     + 0.01;
-                let x = m.handle_reach_x() + m.strap_thickness + 0.02;
+                let x = m.handle_line().reach_x() + m.strap_thickness + 0.02;
                 (
                     Vector3::new(-r, 0.0, -r),
                     Vector3::new(x.max(r), m.cup_height + 0.01, r),
@@ -455,11 +482,16 @@ impl UnseenShape {
             UnseenShape::Mug(m) => m.section(),
             UnseenShape::Car(c) => c.profile(),
         };
+        let handle = match self {
+            UnseenShape::Mug(m) => Some(m.handle_line()),
+            UnseenShape::Bowl(_) | UnseenShape::Car(_) => None,
+        };
         PreparedUnseen {
             shape: *self,
             centre,
             k,
             curve,
+            handle,
         }
     }
 
@@ -484,6 +516,8 @@ pub struct PreparedUnseen {
     k: f64,
     /// Bowl: the mid-surface profile; mug: the cup's section; car: the side profile.
     curve: Vec<Vector2<f64>>,
+    /// Mug: the handle's centre line.
+    handle: Option<HandleLine>,
 }
 
 impl PreparedUnseen {
@@ -508,7 +542,10 @@ impl PreparedUnseen {
             UnseenShape::Mug(m) => {
                 let rho = p.x.hypot(p.z);
                 let cup = polygon_distance(Vector2::new(rho, p.y), &self.curve) - 0.005;
-                let line = m.handle_line(Vector2::new(p.x, p.y));
+                let line = self
+                    .handle
+                    .expect("a prepared mug has its handle")
+                    .distance(Vector2::new(p.x, p.y));
                 let strap = sd_box2(
                     Vector2::new(line, p.z.abs()),
                     Vector2::zeros(),
