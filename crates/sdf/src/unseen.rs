@@ -429,6 +429,66 @@ impl UnseenShape {
         })
     }
 
+    /// Every parameter finite and within its documented range (a scene file may hold any
+    /// numbers; outside the ranges the fields' slope bounds and bounds no longer hold).
+    pub fn check(&self) -> Result<(), SdfError> {
+        let ranges: Vec<(&str, f64, f64, f64)> = match self {
+            UnseenShape::Bowl(b) => vec![
+                ("corner", b.corner, 0.0, 1.0),
+                ("rim_height", b.rim_height, 0.3, 0.75),
+                ("bottom", b.bottom, 0.15, 0.55),
+                ("fullness", b.fullness, 0.0, 1.0),
+                ("rim_wall", b.rim_wall, 0.04, 0.08),
+                ("base_wall", b.base_wall, 0.08, 0.16),
+                ("bead", b.bead, 0.0, 0.07),
+            ],
+            UnseenShape::Mug(m) => vec![
+                ("cup_height", m.cup_height, 1.5, 2.6),
+                ("bulge", m.bulge, -0.08, 0.2),
+                ("lip", m.lip, 0.0, 0.12),
+                ("side_wall", m.side_wall, 0.05, 0.1),
+                ("bottom_wall", m.bottom_wall, 0.1, 0.2),
+                ("strap_top", m.strap_top, 0.7, 0.88),
+                ("strap_bottom", m.strap_bottom, 0.2, 0.4),
+                ("strap_reach", m.strap_reach, 0.35, 0.65),
+                ("strap_width", m.strap_width, 0.1, 0.16),
+                ("strap_thickness", m.strap_thickness, 0.035, 0.06),
+            ],
+            UnseenShape::Car(c) => vec![
+                ("roof_height", c.roof_height, 0.5, 0.95),
+                ("belt_line", c.belt_line, 0.27, c.roof_height - 0.15),
+                ("underbody", c.underbody, 0.07, 0.16),
+                ("cowl", c.cowl, 0.1, 0.75),
+                ("screen_run", c.screen_run, 0.1, 0.45),
+                ("roof_end", c.roof_end, -0.95, c.cowl - c.screen_run - 0.1),
+                ("half_width", c.half_width, 0.36, 0.46),
+                ("door_bulge", c.door_bulge, 0.0, 0.08),
+                ("tumblehome", c.tumblehome, 0.05, 0.3),
+                ("wheel_radius", c.wheel_radius, 0.15, 0.21),
+                ("axle", c.axle, 0.55, 0.72),
+            ],
+        };
+        for (name, v, lo, hi) in ranges {
+            // (A little slack: a scene file's decimals.)
+            if !(v >= lo - 1e-9 && v <= hi + 1e-9) {
+                return Err(SdfError::Invalid(format!(
+                    "{} {name} = {v} outside {lo:.3} … {hi:.3}",
+                    self.category().name()
+                )));
+            }
+        }
+        if let UnseenShape::Bowl(b) = self
+            && b.sides != 0
+            && !(4..=8).contains(&b.sides)
+        {
+            return Err(SdfError::Invalid(format!(
+                "bowl sides = {} (0 for round, else 4 … 8)",
+                b.sides
+            )));
+        }
+        Ok(())
+    }
+
     /// Raw-unit box `(lo, hi)` around the surface; its bottom is the surface's lowest point
     /// (objects stand on it).
     pub fn raw_bounds(&self) -> (Vector3<f64>, Vector3<f64>) {

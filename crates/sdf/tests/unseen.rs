@@ -112,6 +112,7 @@ fn the_draws_cover_every_kind_and_round_trip_as_tables() {
         );
     }
     for s in bowls.iter().chain(&mugs).chain(&cars) {
+        s.check().unwrap();
         let json = serde_json::to_string(s).unwrap();
         let back: UnseenShape = serde_json::from_str(&json).unwrap();
         assert_eq!(back.category(), s.category());
@@ -127,4 +128,13 @@ fn the_draws_cover_every_kind_and_round_trip_as_tables() {
     let family = serde_json::to_string(&FamilyShape::sample(Category::Mug, &mut rng).unwrap());
     assert!(serde_json::from_str::<UnseenShape>(&family.unwrap()).is_err());
     assert!(UnseenShape::sample(Category::Sphere, &mut rng).is_err());
+    // Out-of-range or non-finite parameters are named.
+    if let UnseenShape::Bowl(mut b) = bowls[0] {
+        b.sides = 3;
+        let err = UnseenShape::Bowl(b).check().unwrap_err().to_string();
+        assert!(err.contains("sides = 3"), "{err}");
+        (b.sides, b.rim_wall) = (0, f64::NAN);
+        let err = UnseenShape::Bowl(b).check().unwrap_err().to_string();
+        assert!(err.contains("rim_wall"), "{err}");
+    }
 }

@@ -168,6 +168,10 @@ impl World {
                     "objects[{k}]: scale must be positive and emissivity in [0, 1]"
                 )));
             }
+            if let crate::scene::ObjectShape::Unseen(u) = &o.shape {
+                u.check()
+                    .map_err(|e| SimError::Scene(format!("objects[{k}]: {e}")))?;
+            }
             let rot = yaw(o.yaw_rad) * up;
             let base = Vector3::from(o.base_m);
             let world_from_object = Similarity3::new(

@@ -165,6 +165,16 @@ fn family_shapes_round_trip_and_bad_shapes_are_named() {
         // The base point is on the surface.
         let sdf = family.sdf();
         assert!(sdf.distance(&Vector3::new(0.0, family.base_y(), 0.0)).abs() < 0.02);
+        // An out-of-family parameter outside its range is refused, naming object and field.
+        if let ObjectShape::Unseen(irmirror_sdf::UnseenShape::Mug(mut m)) = family {
+            m.strap_reach = 5.0;
+            s.objects[1].shape = ObjectShape::Unseen(irmirror_sdf::UnseenShape::Mug(m));
+            let err = World::new(model(), &s, None).err().unwrap().to_string();
+            assert!(
+                err.contains("objects[1]") && err.contains("strap_reach"),
+                "{err}"
+            );
+        }
     }
     // A bowl with parameters of neither kind.
     let bad = text.replacen("cut = ", "depthh = ", 1);
