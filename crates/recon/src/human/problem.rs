@@ -503,7 +503,8 @@ impl HumanProblem<'_> {
     }
 
     /// Runs one hypothesis from `init` for `cfg.iterations` steps on the rays `draw` gives;
-    /// returns the final state and the per-step loss, or `None` if it diverged.
+    /// returns the final state (on a fixed batch at one blur, the best state evaluated, the
+    /// final one included) and the per-step loss, or `None` if it diverged.
     pub fn run(
         &self,
         init: &HumanState,
@@ -568,6 +569,10 @@ impl HumanProblem<'_> {
             .min((units as f64 * cfg.max_ray_fraction).ceil() as usize)
             .max(1);
         let iters = cfg.iterations.max(1);
+        // On one fixed batch at one blur every step evaluates the same loss, so the best state
+        // evaluated is kept (the polish starts converged: Adam's first steps can raise it).
+        let fixed_loss = matches!(draw, Draw::Fixed(_)) && cfg.sigma_m2[0] == cfg.sigma_m2[1];
+        let mut best: Option<(f64, HumanState)> = None;
         for it in 0..iters {
             let progress = it as f64 / (iters - 1).max(1) as f64;
             let sigma = cfg.sigma_m2[0] * (cfg.sigma_m2[1] / cfg.sigma_m2[0]).powf(progress);
@@ -645,6 +650,16 @@ impl HumanProblem<'_> {
                 return Ok(None);
             }
             curve.push(loss);
+            if fixed_loss && best.as_ref().is_none_or(|(b, _)| loss < *b) {
+                let rotation = axis_angle_to_matrix(&omega) * base;
+                best = Some((
+                    loss,
+                    HumanState {
+                        rotation,
+                        ..st.clone()
+                    },
+                ));
+            }
             adam.step(&g, &lr, 1.0, &mut step);
             // Learning rates decay by cosine to 10 %.
             let decay = CosineDecay { floor: 0.1 }.at(progress);
@@ -660,6 +675,24 @@ impl HumanProblem<'_> {
             }
         }
         st.rotation = axis_angle_to_matrix(&omega) * base;
+        if let (Some((b, kept)), Draw::Fixed(batch)) = (best, draw) {
+            let at = Tangent {
+                translation: &st.translation,
+                omega: &omega,
+                base: &base,
+                height: st.height,
+                latent: &st.latent,
+                residual: &st.residual,
+            };
+            let batch = Batch {
+                sigma_m2: cfg.sigma_m2[1],
+                ..batch
+            };
+            let (last, _) = self.loss_grad(&mut ws, &at, &batch, cfg, None)?;
+            if !(last.is_finite() && last <= b) {
+                return Ok(Some((kept, curve)));
+            }
+        }
         Ok(Some((st, curve)))
     }
 }

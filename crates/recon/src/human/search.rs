@@ -23,7 +23,8 @@
 //!    rounds and the refinement fit the mask too, the best `polish_best` refined hypotheses by
 //!    the rise (default 1; 0: all) and the best one's front/back partner then take that many
 //!    steps on the thermal rise (at `polish_lr_scale` of the learning rates: they start
-//!    converged; on one fixed batch, `polish_rays`: the loss they are ranked on), and the
+//!    converged; on one fixed batch, `polish_rays`: the loss they are ranked on; the best
+//!    state a polish evaluates is kept, as every step scores the same loss), and the
 //!    final ranking is on the rise — where front and back
 //!    differ; with 0 the rounds and the refinement fit the rise throughout.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
