@@ -326,7 +326,8 @@ fn benches_print_their_tables() {
     assert!(
         out.contains("| 0 | two-parameter | bowl |")
             && out.contains("| 0 | two-parameter | mug |")
-            && out.contains("| mug | two-parameter | 1 |"),
+            && out.contains("| mug | two-parameter | 1 |")
+            && out.contains("| ray angle (°) |"),
         "{out}"
     );
     // Its mug shows three depth pixels of its handle: counted as seen, so its rotation is summarised.
