@@ -65,48 +65,37 @@ fn the_exact_residual_poses_the_true_rotations() {
 #[test]
 fn the_thermal_polish_descends_from_the_truth() {
     use irmirror_recon::human::*;
-    let (sc, sim, _) = car_capture(1);
-    let rays = true_object_footprint_rays(&sc, &sim);
-    let (r0, up) = true_root(&sc, &sim);
-    let mut problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        up,
-        Some(true_floor(&sim, &up)),
-    );
-    let pre = thermal_preprocessed(&sc, &sim);
-    let rad = radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
-    problem.radiometry = Some(&rad);
-    let cfg = HumanConfig::default();
-    let start = HumanState {
-        translation: sim.body.joints[0],
-        rotation: r0,
-        height: sc.person.phenotype.height,
-        latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
-        residual: Vec::new(),
-    };
-    let sample = problem.polish_sample(&cfg, 3);
-    let (end, _) = problem
-        .polish(&start, &cfg, sample.as_ref(), 3)
-        .unwrap()
-        .expect("no divergence");
-    let (before, after) = (
-        problem.full_eval(&start, &cfg).unwrap(),
-        problem.full_eval(&end, &cfg).unwrap(),
-    );
-    let moved = (end.translation - start.translation).norm();
-    eprintln!(
-        "loss {:.4} → {:.4} (data {:.4} → {:.4}), root moved {moved:.3} m",
-        before.loss, after.loss, before.data, after.data
-    );
-    assert!(
-        after.loss <= before.loss,
-        "{} → {}",
-        before.loss,
-        after.loss
-    );
-    assert!(moved < 0.05, "root moved {moved} m");
+    with_thermal_car(1, |problem, sc, sim, r0, _| {
+        let cfg = HumanConfig::default();
+        let start = HumanState {
+            translation: sim.body.joints[0],
+            rotation: r0,
+            height: sc.person.phenotype.height,
+            latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
+            residual: Vec::new(),
+        };
+        let sample = problem.polish_sample(&cfg, 3);
+        let (end, _) = problem
+            .polish(&start, &cfg, sample.as_ref(), 3)
+            .unwrap()
+            .expect("no divergence");
+        let (before, after) = (
+            problem.full_eval(&start, &cfg).unwrap(),
+            problem.full_eval(&end, &cfg).unwrap(),
+        );
+        let moved = (end.translation - start.translation).norm();
+        eprintln!(
+            "loss {:.4} → {:.4} (data {:.4} → {:.4}), root moved {moved:.3} m",
+            before.loss, after.loss, before.data, after.data
+        );
+        assert!(
+            after.loss <= before.loss,
+            "{} → {}",
+            before.loss,
+            after.loss
+        );
+        assert!(moved < 0.05, "root moved {moved} m");
+    });
 }
 
 /// The polish keeps the best state it evaluated: every step on one fixed batch at one blur
@@ -119,49 +108,38 @@ fn the_thermal_polish_descends_from_the_truth() {
 fn the_polish_never_ends_above_its_start() {
     use irmirror_geom::rotation::axis_angle_to_matrix;
     use irmirror_recon::human::*;
-    let (sc, sim, _) = car_capture(1);
-    let rays = true_object_footprint_rays(&sc, &sim);
-    let (r0, up) = true_root(&sc, &sim);
-    let mut problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        up,
-        Some(true_floor(&sim, &up)),
-    );
-    let pre = thermal_preprocessed(&sc, &sim);
-    let rad = radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
-    problem.radiometry = Some(&rad);
-    let mut cfg = HumanConfig::default();
-    cfg.radiometric.polish_rays = 0;
-    cfg.radiometric.polish_lr_scale *= 20.0;
-    cfg.radiometric.polish_iterations = 4;
-    let start = HumanState {
-        translation: sim.body.joints[0] + Vector3::new(0.1, 0.0, 0.0),
-        rotation: axis_angle_to_matrix(&(up.normalize() * 10f64.to_radians())) * r0,
-        height: sc.person.phenotype.height,
-        latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
-        residual: Vec::new(),
-    };
-    let (end, curve) = problem
-        .polish(&start, &cfg, None, 3)
-        .unwrap()
-        .expect("no divergence");
-    let (before, after) = (
-        problem.full_eval(&start, &cfg).unwrap().loss,
-        problem.full_eval(&end, &cfg).unwrap().loss,
-    );
-    eprintln!("loss {before:.4} → {after:.4}; steps {curve:.4?}");
-    let lowest = curve.iter().copied().fold(f64::INFINITY, f64::min);
-    assert!(after <= before + 1e-9, "{before} → {after}");
-    assert!(
-        after <= lowest + 1e-9,
-        "ended at {after}, a step scored {lowest}"
-    );
-    assert!(
-        curve.iter().any(|&l| l > curve[0]),
-        "no step rose above the start: the test shows nothing ({curve:?})"
-    );
+    with_thermal_car(1, |problem, sc, sim, r0, up| {
+        let mut cfg = HumanConfig::default();
+        cfg.radiometric.polish_rays = 0;
+        cfg.radiometric.polish_lr_scale *= 20.0;
+        cfg.radiometric.polish_iterations = 4;
+        let start = HumanState {
+            translation: sim.body.joints[0] + Vector3::new(0.1, 0.0, 0.0),
+            rotation: axis_angle_to_matrix(&(up.normalize() * 10f64.to_radians())) * r0,
+            height: sc.person.phenotype.height,
+            latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
+            residual: Vec::new(),
+        };
+        let (end, curve) = problem
+            .polish(&start, &cfg, None, 3)
+            .unwrap()
+            .expect("no divergence");
+        let (before, after) = (
+            problem.full_eval(&start, &cfg).unwrap().loss,
+            problem.full_eval(&end, &cfg).unwrap().loss,
+        );
+        eprintln!("loss {before:.4} → {after:.4}; steps {curve:.4?}");
+        let lowest = curve.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(after <= before + 1e-9, "{before} → {after}");
+        assert!(
+            after <= lowest + 1e-9,
+            "ended at {after}, a step scored {lowest}"
+        );
+        assert!(
+            curve.iter().any(|&l| l > curve[0]),
+            "no step rose above the start: the test shows nothing ({curve:?})"
+        );
+    });
 }
 
 /// The refinement on its fixed batch (`refine_rays`, at `refine_lr_scale` of the rates) descends
@@ -298,4 +276,34 @@ fn the_residual_prior_weakens_on_a_large_reflection() {
         assert_eq!(w.w_prior, cfg.w_prior);
         assert_eq!(w.residual_ref_px, ref_px);
     }
+}
+
+/// Car seed `seed` (Lepton) through its true objects, every pixel's footprint traced, the
+/// thermal rise on: runs `f` on the problem, the scene, the simulation, the true root rotation
+/// and the up axis.
+fn with_thermal_car(
+    seed: u64,
+    f: impl FnOnce(
+        &irmirror_recon::human::HumanProblem<'_>,
+        &irmirror_sim::SceneFile,
+        &irmirror_sim::Simulation,
+        nalgebra::Matrix3<f64>,
+        Vector3<f64>,
+    ),
+) {
+    use irmirror_recon::human::radiometric;
+    let (sc, sim, _) = car_capture(seed);
+    let rays = true_object_footprint_rays(&sc, &sim);
+    let (r0, up) = true_root(&sc, &sim);
+    let mut problem = problem_for(
+        &sim,
+        &rays,
+        &sim.reflection_mask,
+        up,
+        Some(true_floor(&sim, &up)),
+    );
+    let pre = thermal_preprocessed(&sc, &sim);
+    let rad = radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
+    problem.radiometry = Some(&rad);
+    f(&problem, &sc, &sim, r0, up);
 }

@@ -676,19 +676,11 @@ impl HumanProblem<'_> {
         }
         st.rotation = axis_angle_to_matrix(&omega) * base;
         if let (Some((b, kept)), Draw::Fixed(batch)) = (best, draw) {
-            let at = Tangent {
-                translation: &st.translation,
-                omega: &omega,
-                base: &base,
-                height: st.height,
-                latent: &st.latent,
-                residual: &st.residual,
-            };
             let batch = Batch {
                 sigma_m2: cfg.sigma_m2[1],
                 ..batch
             };
-            let (last, _) = self.loss_grad(&mut ws, &at, &batch, cfg, None)?;
+            let (last, _) = self.score(&mut ws, &st, &batch, cfg)?;
             if !(last.is_finite() && last <= b) {
                 return Ok(Some((kept, curve)));
             }
