@@ -111,12 +111,6 @@ fn near_side_mm(fit_mesh: &TriMesh, true_mesh: &TriMesh, truth: &Similarity3<f64
 /// pixels found the handle's side (7 of 8), fits with 0–1 did not (5 of 5).
 const HANDLE_SEEN_PX: usize = 3;
 
-/// Depth pixels of `mask` whose points lie on the handle of a true mug (`truth`: object →
-/// depth frame, `true_mesh` in the depth frame). Both mug families put the handle on the
-/// object's +X side in the z = 0 plane, the cup's axis along +Y (but not always through the
-/// origin: a family shape is centred on its bounding box). The cup's widest radius is half the
-/// mesh's Z extent, its axis that far in from the −X extreme; a point more than 5 % beyond
-/// that radius on +X is the handle's.
 /// What stage 2 sees of stage 1: per true object, over the thermal pixels whose centre ray
 /// meets it and meets a fitted object, the angle between the two reflected rays (degrees; both
 /// with the smoothed normals stage 2 uses). A person 3 m away moves by 5 cm per 1°.
@@ -152,6 +146,12 @@ fn ray_angles_deg(
     out
 }
 
+/// Depth pixels of `mask` whose points lie on the handle of a true mug (`truth`: object →
+/// depth frame, `true_mesh` in the depth frame). Both mug families put the handle on the
+/// object's +X side in the z = 0 plane, the cup's axis along +Y (but not always through the
+/// origin: a family shape is centred on its bounding box). The cup's widest radius is half the
+/// mesh's Z extent, its axis that far in from the −X extreme; a point more than 5 % beyond
+/// that radius on +X is the handle's.
 fn handle_pixels(
     capture: &Capture,
     mask: &irmirror_capture::Image<bool>,
@@ -410,12 +410,13 @@ fn set_name(s: Shapes) -> &'static str {
     }
 }
 
-/// "median / 90th percentile / max".
+/// The upper median.
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }
 
+/// "median / 90th percentile / max".
 fn stats(mut v: Vec<f64>) -> String {
     v.sort_by(f64::total_cmp);
     let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
