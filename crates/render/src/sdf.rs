@@ -25,6 +25,13 @@ pub trait Sdf: Send + Sync {
     }
     /// Radius of an origin-centred sphere containing the whole surface.
     fn bounding_radius(&self) -> f64;
+    /// The longest step a sphere tracer may take on this field, object units: the width of
+    /// the band about the surface where the field is a distance. An exact SDF has no limit; a
+    /// network trained on clamped distances (DeepSDF) is a distance only within its clamp, and
+    /// beyond it may rise twice as fast as one, so a step by its value there crosses the surface.
+    fn max_step(&self) -> f64 {
+        f64::INFINITY
+    }
 }
 
 /// A sphere of `radius` about the origin.

@@ -85,8 +85,10 @@ pub fn trace(object: &PlacedSdf, ray_depth: &Ray<f64>, params: &TraceParams) -> 
 }
 
 /// Sphere-traces the unit ray `o + t r` (object frame, `t ≥ 0`) into `sdf` from where it enters
-/// the bounding sphere, stepping `t += d` until `d < tol` (object units): the distance `t` there,
-/// or `None` when the ray misses the bounding sphere, leaves it, or `max_iters` steps pass.
+/// the bounding sphere, stepping `t += min(d, max_step)` until `d < tol` (object units): the
+/// distance `t` there, or `None` when the ray misses the bounding sphere, leaves it, or
+/// `max_iters` steps pass. A step that lands inside (`d < 0`: the field rose faster than a
+/// distance, as a network's may) is undone by bisecting back to the crossing.
 /// [`trace`]'s coarse march (a loose `tol`, then refinement) and stage 1's rendered depth (a
 /// tight `tol`) both use it.
 pub fn march(
@@ -109,18 +111,49 @@ pub fn march(
     if t_exit < 0.0 {
         return None;
     }
+    let max_step = sdf.max_step();
+    // The last point found outside, if any step was taken.
+    let mut outside = None;
     for _ in 0..max_iters {
         let d = sdf.distance(&(o + r * t));
         if d < tol {
-            return Some(t);
+            return Some(match outside {
+                Some(lo) if d < 0.0 => crossing(sdf, o, r, tol, (lo, t)),
+                _ => t,
+            });
         }
+        outside = Some(t);
         // Stepping by d never crosses the surface of a 1-Lipschitz field.
-        t += d;
+        t += d.min(max_step);
         if t > t_exit {
             return None;
         }
     }
     None
+}
+
+/// Bisects `(lo, hi)` (the field positive at `lo`, negative at `hi`) to a `t` where
+/// `0 ≤ d < tol`, or to the outside end of a bracket 2⁻⁵⁰ as wide.
+fn crossing(
+    sdf: &dyn Sdf,
+    o: &Vector3<f64>,
+    r: &Vector3<f64>,
+    tol: f64,
+    (mut lo, mut hi): (f64, f64),
+) -> f64 {
+    // 50 halvings: below 1e-12 of any step a march takes.
+    for _ in 0..50 {
+        let mid = 0.5 * (lo + hi);
+        let d = sdf.distance(&(o + r * mid));
+        if d < 0.0 {
+            hi = mid;
+        } else if d < tol {
+            return mid;
+        } else {
+            lo = mid;
+        }
+    }
+    lo
 }
 
 #[cfg(test)]
@@ -196,6 +229,69 @@ mod tests {
             }
             assert!(n > 5);
         }
+    }
+
+    /// A unit sphere's distance within `band` of its surface, rising twice as fast beyond it
+    /// (like a network trained on distances clamped at `band`), traced at most `max_step` a step.
+    struct Steep {
+        band: f64,
+        max_step: f64,
+        slope: f64,
+    }
+
+    impl Sdf for Steep {
+        fn distance(&self, p: &Vector3<f64>) -> f64 {
+            let x = p.norm() - 1.0;
+            let x = if x > self.band {
+                self.band + 2.0 * (x - self.band)
+            } else {
+                x
+            };
+            self.slope * x
+        }
+        fn bounding_radius(&self) -> f64 {
+            3.0
+        }
+        fn max_step(&self) -> f64 {
+            self.max_step
+        }
+    }
+
+    #[test]
+    fn a_field_steeper_than_a_distance_is_traced_to_its_surface() {
+        // From (0, 0, −2.9) along +z: the sphere at t = 1.9.
+        let (o, r) = (Vector3::new(0.0, 0.0, -2.9), Vector3::z());
+        let tol = 1e-9;
+        let capped = Steep {
+            band: 0.1,
+            max_step: 0.1,
+            slope: 1.0,
+        };
+        let t = march(&capped, &o, &r, tol, 200).unwrap();
+        assert!((t - 1.9).abs() < 1e-8, "{t}");
+        // Uncapped, the march's first step (2.7) ends inside; bisection brings it back.
+        let t = march(
+            &Steep {
+                max_step: f64::INFINITY,
+                ..capped
+            },
+            &o,
+            &r,
+            tol,
+            200,
+        )
+        .unwrap();
+        assert!((t - 1.9).abs() < 1e-8, "{t}");
+        // Steeper near the surface too (1.5 × a distance): every step overshoots.
+        let steep = Steep {
+            slope: 1.5,
+            ..capped
+        };
+        let t = march(&steep, &o, &r, tol, 200).unwrap();
+        assert!(
+            (t - 1.9).abs() < 1e-8 && steep.distance(&(o + r * t)) >= 0.0,
+            "{t}"
+        );
     }
 
     #[test]

@@ -534,6 +534,11 @@ impl irmirror_render::sdf::Sdf for LatentSdf {
     fn bounding_radius(&self) -> f64 {
         1.0
     }
+    /// Training clamps distances at [`CLAMP`]: beyond it the value is unconstrained (the car
+    /// prior's rises ≈ 1.9 per unit along a camera ray), so sphere tracing steps at most that far.
+    fn max_step(&self) -> f64 {
+        CLAMP
+    }
 }
 
 /// Batched forward pass in candle: `x` is `[N, L+3]` (latent then point), the result `[N]`.
