@@ -447,8 +447,8 @@ fn held_out_report() {
 /// crosses zero, from a camera outside the unit sphere and from one inside it (a car seen from
 /// 1.5 m: 0.7 of its normalised radius). The priors' fields rise up to twice as fast as a
 /// distance beyond their training clamp: a march stepping by the value (no step limit, no
-/// bisection) ended inside the bowl on 20 of its 43 rays from outside, and inside a fitted car
-/// 0.37 m past its surface (median, stage 1's car bench).
+/// bisection) ended elsewhere on 20 of the bowl's 43 rays from outside, and inside a fitted car,
+/// 0.37 m from the true car's hits (median, family car seed 0).
 #[test]
 fn shipped_priors_are_traced_to_their_first_zero_crossing() {
     use irmirror_render::sphere_trace::march;
