@@ -194,6 +194,12 @@ enum Command {
         /// Only this cell.
         #[arg(long, value_enum)]
         cell: Option<Cell>,
+        /// The simulated objects' shapes: simple (the two-parameter shapes stage 1's default
+        /// fits: the published tables), family (the learned priors' families; with a config
+        /// setting `prior = "learned"` under `[objects.fit]`, the paper's setting) or unseen
+        /// (from outside both).
+        #[arg(long, value_enum, default_value = "simple")]
+        shapes: Shapes,
         /// Only the full model (no ablation columns).
         #[arg(long)]
         full_only: bool,
@@ -388,6 +394,7 @@ fn main() -> std::process::ExitCode {
             out,
             limit,
             cell,
+            shapes,
             full_only,
             variants,
             config,
@@ -400,6 +407,7 @@ fn main() -> std::process::ExitCode {
                 &irmirror_eval::bench::Selection {
                     limit: limit.map(|l| l as usize),
                     cell,
+                    shapes,
                     full_only,
                     variants,
                     config,

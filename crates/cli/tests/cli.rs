@@ -514,12 +514,10 @@ fn train_sdf_trains_a_loadable_prior_and_refuses_bad_input() {
     assert!(!o.status.success() && stderr(&o).contains(".safetensors"));
 }
 
-/// `eval --basin`: four starts per capture, offset and turned as asked, reported per start and
-/// in the table; with a two-step refinement the ends stay about the offset away from the truth
-/// (the starts sit on the objects→person line, not at the truth). Bad values: a clear error.
-#[test]
-fn eval_probes_the_refinement_basin() {
-    let dir = tmp("eval-basin");
+/// `eval --limit 1 --full-only` with stage 2 cut to a few steps, plus `args`, into a fresh
+/// directory: its output and the result directory.
+fn cheap_eval(name: &str, args: &[&str]) -> (std::process::Output, std::path::PathBuf) {
+    let dir = tmp(name);
     std::fs::create_dir_all(&dir).unwrap();
     let cfg = dir.join("cheap.toml");
     std::fs::write(
@@ -528,20 +526,30 @@ fn eval_probes_the_refinement_basin() {
     )
     .unwrap();
     let out = dir.join("out");
-    let o = irmirror(&[
+    let mut all = vec![
         "eval",
-        "--cell",
-        "tabletop-wide",
         "--limit",
         "1",
         "--full-only",
         "--config",
         cfg.to_str().unwrap(),
-        "--basin",
-        "0.2,20",
         "--out",
         out.to_str().unwrap(),
-    ]);
+    ];
+    all.extend_from_slice(args);
+    (irmirror(&all), out)
+}
+
+/// `eval --basin`: four starts per capture, offset and turned as asked, reported per start and
+/// in the table; with a two-step refinement the ends stay about the offset away from the truth
+/// (the starts sit on the objects→person line, not at the truth). Bad values: a clear error.
+#[test]
+fn eval_probes_the_refinement_basin() {
+    let (o, out) = cheap_eval(
+        "eval-basin",
+        &["--cell", "tabletop-wide", "--basin", "0.2,20"],
+    );
+    let dir = out.parent().unwrap().to_path_buf();
     assert!(o.status.success(), "{}", stderr(&o));
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
@@ -594,6 +602,29 @@ fn eval_probes_the_refinement_basin() {
         );
         assert!(!bad.exists());
     }
+}
+
+/// `eval --shapes family`: the captures' objects come from the learned priors' families, the
+/// run record says so, and the diagnosis traces the true (procedural) objects too: the truth's
+/// data term through them and stage 1's mirror on the mask are measured, not left out.
+#[test]
+fn eval_simulates_family_shapes_and_diagnoses_their_mirror() {
+    let (o, out) = cheap_eval(
+        "eval-family",
+        &["--cell", "tabletop-mug", "--shapes", "family"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let record = std::fs::read_to_string(out.join("run.toml")).unwrap();
+    assert!(record.contains("shapes = \"family\""), "{record}");
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let d = &results["captures"][0]["diagnosis"];
+    let through_truth = d["truth_loss_true_objects"].as_f64().unwrap();
+    let angle = d["mask_ray_angle_deg"].as_f64().unwrap();
+    assert!(
+        through_truth.is_finite() && (0.0..180.0).contains(&angle),
+        "{d}"
+    );
 }
 
 #[test]

@@ -10,6 +10,7 @@
 //!  ReflectedRays × body (pose prior, soft occupancy) ─human─► hypotheses, best first
 //! ```
 
+pub mod depth_mirror;
 pub mod human;
 pub mod morphology;
 pub mod objects;

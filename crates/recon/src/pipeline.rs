@@ -41,6 +41,8 @@ pub struct ReconConfig {
     pub objects: Stage1Config,
     /// Reflected rays: sphere tracing.
     pub trace: TraceParams,
+    /// Reflected rays: a large object's mirror taken from the depth data where they agree.
+    pub mirror: crate::depth_mirror::DepthMirror,
     /// Stage 2.
     pub human: HumanConfig,
     /// Ablations applied.
@@ -206,15 +208,50 @@ pub fn reconstruct(
 ///
 /// With the radiometric term on and a reflection mask of at most `footprint_max_mask_px`
 /// pixels, every pixel near an object is sampled at [`FOOTPRINT_OFFSETS`] instead (its rays
-/// next to each other; see [`footprint_rays`]).
+/// next to each other; see [`footprint_rays`]). With `[mirror] enabled`, large objects' rays
+/// are then re-reflected off the depth data where it agrees with the fit
+/// ([`crate::depth_mirror`]).
 pub fn reflected_rays(
     capture: &Capture,
     objects: &Objects,
     mask: &Image<bool>,
     cfg: &ReconConfig,
 ) -> ReflectedRays<f64> {
-    let (trace, normals) = cfg.rays_settings();
     let placed = objects.placed();
+    let mut rays =
+        reflected_rays_through(capture, &placed, objects.ground.plane.as_ref(), mask, cfg);
+    let scales: Vec<f64> = objects
+        .objects
+        .iter()
+        .map(|o| o.depth_from_object.scale)
+        .collect();
+    let n = crate::depth_mirror::refine(
+        &mut rays,
+        &capture.depth_m,
+        &capture.depth_camera,
+        &capture.depth_from_thermal.translation,
+        &scales,
+        &cfg.mirror,
+    );
+    if cfg.mirror.enabled {
+        tracing::debug!(
+            "mirror from the depth data: {n} of {} rays re-reflected",
+            rays.len()
+        );
+    }
+    rays
+}
+
+/// [`reflected_rays`] through any placed objects (the simulator's true shapes, for the
+/// benchmark's diagnosis), rays meeting `plane` dropped.
+pub fn reflected_rays_through(
+    capture: &Capture,
+    placed: &[irmirror_render::sdf::PlacedSdf],
+    plane: Option<&crate::plane::Plane>,
+    mask: &Image<bool>,
+    cfg: &ReconConfig,
+) -> ReflectedRays<f64> {
+    let (trace, normals) = cfg.rays_settings();
     let hcfg = cfg.human_settings();
     let mask_px = mask.data.iter().filter(|&&m| m).count();
     let max_px = hcfg.radiometric.footprint_max_mask_px;
@@ -222,16 +259,16 @@ pub fn reflected_rays(
         let rays = footprint_rays(
             &capture.thermal_camera,
             &capture.depth_from_thermal,
-            &placed,
+            placed,
             &trace,
             normals,
         );
-        return unblocked(&rays, &placed, objects.ground.plane.as_ref(), &trace);
+        return unblocked(&rays, placed, plane, &trace);
     }
     let mut all_rays = reflect_camera(
         &capture.thermal_camera,
         &capture.depth_from_thermal,
-        &placed,
+        placed,
         &trace,
         normals,
     );
@@ -246,12 +283,12 @@ pub fn reflected_rays(
         all_rays.extend(&reflect_footprint(
             &capture.thermal_camera,
             &capture.depth_from_thermal,
-            &placed,
+            placed,
             &trace,
             &missed,
         ));
     }
-    unblocked(&all_rays, &placed, objects.ground.plane.as_ref(), &trace)
+    unblocked(&all_rays, placed, plane, &trace)
 }
 
 /// Where a pixel's box is sampled, pixels from its centre: the 2 × 2 Gauss–Legendre nodes

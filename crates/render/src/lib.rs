@@ -11,6 +11,7 @@
 //! All frames are the depth camera's (metres). Kernels are generic over `f32`/`f64` so the
 //! gradient tests run in f64.
 
+pub mod baked;
 pub mod bench_scene;
 pub mod bvh;
 pub mod distance;

@@ -316,21 +316,22 @@ impl std::fmt::Display for Cell {
     }
 }
 
-/// The benchmark's scene of one cell: the regime's scene keeping only the cell's object type,
-/// redrawn from draw `first_attempt` on until objects remain and the reflection shows (≥
+/// The benchmark's scene of one cell: the regime's scene (objects from `shapes`) keeping only the
+/// cell's object type, redrawn from draw `first_attempt` on until objects remain and the reflection shows (≥
 /// [`MIN_REFLECTION_PIXELS`] with an ideal sensor); the scene and the draw that made it. The NETD
 /// is set to `netd_mk`. The person's pose is a motion-capture pose
 /// ([`irmirror_body::mocap::MocapSet::builtin`]), not one of the pose prior's templates.
 pub fn benchmark_scene(
     model: &BodyModel,
     cell: Cell,
+    shapes: Shapes,
     seed: u64,
     netd_mk: f64,
     first_attempt: u64,
 ) -> Result<(SceneFile, u64), SimError> {
     let mocap = irmirror_body::mocap::MocapSet::builtin()?;
     for attempt in first_attempt..BENCHMARK_ATTEMPTS {
-        let mut scene = draw_regime(model, cell.regime(), Shapes::Simple, seed, attempt);
+        let mut scene = draw_regime(model, cell.regime(), shapes, seed, attempt);
         // The person's pose: real motion capture, not the pose prior's own generator (its own
         // stream: the rest of the scene is the regime's, draw for draw).
         let mut rng = irmirror_geom::rng::seeded(seed, 4000 + attempt);

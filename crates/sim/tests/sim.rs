@@ -189,13 +189,30 @@ fn family_shapes_round_trip_and_bad_shapes_are_named() {
 /// set's.
 #[test]
 fn benchmark_persons_wear_motion_capture_poses() {
-    use irmirror_sim::presets::{Cell, benchmark_scene};
+    use irmirror_sim::presets::{Cell, Shapes, benchmark_scene};
+    use irmirror_sim::scene::ObjectShape;
     let model = common::model();
     let set = irmirror_body::mocap::MocapSet::builtin().unwrap();
-    for (cell, seed) in [(Cell::TabletopBowl, 5), (Cell::Car, 6)] {
-        let (a, attempt) = benchmark_scene(model, cell, seed, 50.0, 0).unwrap();
-        let (b, _) = benchmark_scene(model, cell, seed, 50.0, 0).unwrap();
+    let cases = [
+        (Cell::TabletopBowl, Shapes::Simple, 5),
+        (Cell::Car, Shapes::Simple, 6),
+        (Cell::TabletopMug, Shapes::Family, 7),
+    ];
+    for (cell, shapes, seed) in cases {
+        let (a, attempt) = benchmark_scene(model, cell, shapes, seed, 50.0, 0).unwrap();
+        let (b, _) = benchmark_scene(model, cell, shapes, seed, 50.0, 0).unwrap();
         assert_eq!(a.person.rotvec_rad, b.person.rotvec_rad);
+        // The cell's objects, from the families asked for.
+        assert!(
+            a.objects
+                .iter()
+                .all(|o| cell.category().is_none_or(|c| o.shape.category() == c)
+                    && matches!(
+                        (&o.shape, shapes),
+                        (ObjectShape::Simple(_), Shapes::Simple)
+                            | (ObjectShape::Family(_), Shapes::Family)
+                    ))
+        );
         let source = a
             .person
             .pose_name

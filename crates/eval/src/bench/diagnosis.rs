@@ -5,12 +5,11 @@ use super::run::Prepared;
 use crate::EvalError;
 use crate::score::{facing_error_deg, vertex_error};
 use irmirror_recon::human::{HumanProblem, HumanState, edge_distance, posed_body};
-use irmirror_recon::objects::{FittedObject, Objects};
 use irmirror_recon::pipeline::{
-    BodyPriors, ReconConfig, Reconstruction, human_problem, radiometry, reflected_rays,
+    BodyPriors, ReconConfig, Reconstruction, human_problem, radiometry, reflected_rays_through,
 };
 use irmirror_render::ReflectedRays;
-use irmirror_sim::scene::ObjectShape;
+use irmirror_render::sdf::PlacedSdf;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -59,8 +58,9 @@ pub struct Diagnosis {
     /// The true body mesh's data term.
     pub truth_loss: f64,
     /// The true body's data term through the *true* objects (rays traced against the
-    /// simulator's shapes; `None` for shapes stage 1 cannot represent): low here but high through
-    /// the fitted objects means stage 1's mirror, not the optimiser or the observation, is off.
+    /// simulator's shapes, whichever set they come from; `None` in results written before
+    /// 2026-12-01 for shapes outside the two-parameter family): low here but high through the
+    /// fitted objects means stage 1's mirror, not the optimiser or the observation, is off.
     #[serde(default)]
     pub truth_loss_true_objects: Option<f64>,
     /// Stage 1's mirror where it matters: over the reflection mask's pixels, the median angle
@@ -229,19 +229,22 @@ pub(super) fn diagnose(
         problem.mesh_data_loss(&truth, &mask_cfg).0,
         problem.mesh_data_loss(&flipped, &mask_cfg).0,
     ]);
-    let (truth_loss_true_objects, mirror) = match true_objects(p, &rec.objects) {
-        Some(objects) => {
-            let rays = reflected_rays(&p.capture, &objects, &rec.pre.mask, cfg);
-            let (rad, _) = radiometry(&rec.pre, &rays, model, &hcfg)?;
-            let through_truth = HumanProblem {
-                rays: &rays,
-                radiometry: rad.as_ref(),
-                ..problem
-            };
-            let mirror = mirror_error(&rec.rays, &rays, &rec.pre.mask, &p.sim.body.joints[0]);
-            (Some(through_truth.mesh_data_loss(&truth, &hcfg).0), mirror)
-        }
-        None => (None, None),
+    let (truth_loss_true_objects, mirror) = {
+        let rays = reflected_rays_through(
+            &p.capture,
+            &true_objects(p),
+            rec.objects.ground.plane.as_ref(),
+            &rec.pre.mask,
+            cfg,
+        );
+        let (rad, _) = radiometry(&rec.pre, &rays, model, &hcfg)?;
+        let through_truth = HumanProblem {
+            rays: &rays,
+            radiometry: rad.as_ref(),
+            ..problem
+        };
+        let mirror = mirror_error(&rec.rays, &rays, &rec.pre.mask, &p.sim.body.joints[0]);
+        (Some(through_truth.mesh_data_loss(&truth, &hcfg).0), mirror)
     };
     let (mask_ray_angle_deg, mask_ray_offset_m) = mirror.unzip();
     let hypothesis_losses: Vec<f64> = rec.human.hypotheses.iter().map(|h| h.data_loss).collect();
@@ -526,30 +529,15 @@ fn model_truth(
     )
 }
 
-/// The simulator's objects as stage-1 results (same ground and masks as `fitted`), when every
-/// one is a two-parameter shape stage 1 can represent.
-fn true_objects(p: &Prepared, fitted: &Objects) -> Option<Objects> {
-    let objects = p
-        .scene
+/// The simulator's objects, placed as it traced them (any shape set).
+fn true_objects(p: &Prepared) -> Vec<PlacedSdf> {
+    p.scene
         .objects
         .iter()
         .zip(&p.sim.object_poses)
-        .map(|(o, pose)| match o.shape {
-            ObjectShape::Simple(shape) => Some(FittedObject {
-                category: shape.category(),
-                shape,
-                depth_from_object: *pose,
-                loss: 0.0,
-                mean_surface_error_m: 0.0,
-                points: 0,
-                loss_curve: vec![],
-                learned: None,
-            }),
-            ObjectShape::Family(_) | ObjectShape::Unseen(_) => None,
+        .map(|(o, pose)| PlacedSdf {
+            sdf: o.shape.sdf(),
+            depth_from_object: *pose,
         })
-        .collect::<Option<Vec<_>>>()?;
-    Some(Objects {
-        objects,
-        ..fitted.clone()
-    })
+        .collect()
 }

@@ -20,7 +20,7 @@ pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
 use crate::EvalError;
 use crate::score::Evaluation;
 use irmirror_recon::pipeline::Ablation;
-use irmirror_sim::presets::Cell;
+use irmirror_sim::presets::{Cell, Shapes};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -221,6 +221,9 @@ pub struct Selection {
     pub limit: Option<usize>,
     /// Only this cell.
     pub cell: Option<Cell>,
+    /// The simulated objects' shapes: the two-parameter family stage 1's default fits (the
+    /// benchmark's tables), the learned priors' families, or shapes from outside them.
+    pub shapes: Shapes,
     /// Only the full model.
     pub full_only: bool,
     /// Only these variants (empty: as the set says).

@@ -20,7 +20,7 @@ use irmirror_recon::human::posed_body;
 use irmirror_recon::objects::{Objects, reconstruct_objects};
 use irmirror_recon::pipeline::{BodyPriors, ReconConfig, reconstruct_human};
 use irmirror_recon::{Preprocessed, ReconError, preprocess};
-use irmirror_sim::presets::{Cell, benchmark_scene};
+use irmirror_sim::presets::{Cell, Shapes, benchmark_scene};
 use irmirror_sim::{SceneFile, Simulation};
 use nalgebra::Vector3;
 use rand_distr::{Distribution, StandardNormal};
@@ -90,7 +90,14 @@ pub fn run(
             reason: e.to_string(),
         })?;
         let keep = selection.keep_captures.then(|| thumbs.join("capture"));
-        let p = prepare(&model, plan, &scratch, keep.as_deref(), &selection.config)?;
+        let p = prepare(
+            &model,
+            plan,
+            selection.shapes,
+            &scratch,
+            keep.as_deref(),
+            &selection.config,
+        )?;
         results.push(run_capture(
             &p,
             plan,
@@ -114,7 +121,7 @@ pub fn run(
     )?;
     write_text(&stage.path("table.md"), &table)?;
     write_text(&stage.path("report.html"), &html(&report, &table))?;
-    let mut record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "variants": selection.variants, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": selection.config, "random_draws": RANDOM_DRAWS });
+    let mut record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "shapes": selection.shapes, "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "variants": selection.variants, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": selection.config, "random_draws": RANDOM_DRAWS });
     // TOML has no null: the basin probe's settings only when it ran.
     if let Some(b) = selection.basin {
         record["basin"] = serde_json::json!(b);
@@ -134,13 +141,15 @@ pub fn run(
 fn prepare(
     model: &BodyModel,
     plan: &Planned,
+    shapes: Shapes,
     scratch: &Path,
     keep: Option<&Path>,
     cfg: &ReconConfig,
 ) -> Result<Prepared, EvalError> {
     let (seed, mut first) = (plan.seed, 0);
     loop {
-        let (scene, attempt) = benchmark_scene(model, plan.cell, seed, plan.netd_mk, first)?;
+        let (scene, attempt) =
+            benchmark_scene(model, plan.cell, shapes, seed, plan.netd_mk, first)?;
         let sim = irmirror_sim::simulate(model, &scene, seed)?;
         let dir = keep.map_or_else(|| scratch.join(&plan.id), Path::to_path_buf);
         if dir.exists() {

@@ -179,7 +179,7 @@ pub struct FittedObject {
 }
 
 /// A fitted shape of a learned prior.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Serialize)]
 pub struct LearnedShape {
     /// The prior's latent code.
     pub latent: Vec<f64>,
@@ -191,6 +191,19 @@ pub struct LearnedShape {
     /// The field of `latent`.
     #[serde(skip)]
     pub sdf: Arc<LatentSdf>,
+    /// What the renderer traces: for a car `sdf` baked (`fit::BAKE_CELLS`), else `sdf` with a
+    /// grid beyond a band about its surface (`fit::BAND_CELLS`).
+    #[serde(skip)]
+    pub traced: Arc<dyn irmirror_render::sdf::Sdf>,
+}
+
+impl std::fmt::Debug for LearnedShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LearnedShape")
+            .field("latent", &self.latent)
+            .field("base_y", &self.base_y)
+            .finish_non_exhaustive()
+    }
 }
 
 fn ser_sim<S: serde::Serializer>(s: &Similarity3<f64>, ser: S) -> Result<S::Ok, S::Error> {
@@ -218,7 +231,7 @@ impl FittedObject {
     pub fn placed(&self) -> PlacedSdf {
         match &self.learned {
             Some(l) => PlacedSdf {
-                sdf: l.sdf.clone(),
+                sdf: l.traced.clone(),
                 depth_from_object: self.depth_from_object,
             },
             None => PlacedSdf {
