@@ -443,15 +443,6 @@ pub fn fit_learned(
         },
     )?;
     let field = Arc::new(net.shape(&placed.latent)?);
-    // Stage 2 traces every fitted field over a whole frame (a car: ≈ 10⁶ rays, each a few dozen
-    // values): a car through its baked copy (its smooth panels lose 0.07° of normal to it,
-    // median), a bowl or mug through a grid that only speeds the march (their thin walls bend
-    // within a cell: ≈ 1° at 96³), the network answering near the surface.
-    let traced: Arc<dyn irmirror_render::sdf::Sdf> = if category == irmirror_geom::Category::Car {
-        Arc::new(field.baked(BAKE_CELLS)?)
-    } else {
-        Arc::new(field.baked_banded(BAND_CELLS)?)
-    };
     let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?
         .main_components(irmirror_sdf::quality::MAIN_PART_FRACTION);
     let base_y = mesh
@@ -478,7 +469,7 @@ pub fn fit_learned(
             base_y,
             net,
             sdf: field,
-            traced,
+            traced: Arc::default(),
         }),
         ..fit
     })

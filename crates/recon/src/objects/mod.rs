@@ -191,10 +191,36 @@ pub struct LearnedShape {
     /// The field of `latent`.
     #[serde(skip)]
     pub sdf: Arc<LatentSdf>,
-    /// What the renderer traces: for a car `sdf` baked (`fit::BAKE_CELLS`), else `sdf` with a
-    /// grid beyond a band about its surface (`fit::BAND_CELLS`).
+    /// What the renderer traces, made on first use ([`LearnedShape::traced`]).
     #[serde(skip)]
-    pub traced: Arc<dyn irmirror_render::sdf::Sdf>,
+    pub traced: Arc<std::sync::OnceLock<Arc<dyn irmirror_render::sdf::Sdf>>>,
+}
+
+impl LearnedShape {
+    /// The field the renderer traces, sampled on first use (stage 2; not stage 1's fit, whose
+    /// time it would add to): every fitted field is traced over a whole frame (a car: ≈ 10⁶
+    /// rays, each a few dozen values), so a car through its baked copy (`fit::BAKE_CELLS`; its
+    /// smooth panels lose 0.07° of normal to it, median), a bowl or mug through a grid that only
+    /// speeds the march (`fit::BAND_CELLS`; their thin walls bend within a cell, ≈ 1° at 96³),
+    /// the network answering near the surface. If sampling fails, the network itself (logged).
+    pub fn traced(&self, category: Category) -> Arc<dyn irmirror_render::sdf::Sdf> {
+        self.traced
+            .get_or_init(|| {
+                let baked = if category == Category::Car {
+                    self.sdf.baked(fit::BAKE_CELLS)
+                } else {
+                    self.sdf.baked_banded(fit::BAND_CELLS)
+                };
+                match baked {
+                    Ok(b) => Arc::new(b),
+                    Err(e) => {
+                        tracing::warn!("tracing the {category} prior's network itself: {e}");
+                        self.sdf.clone()
+                    }
+                }
+            })
+            .clone()
+    }
 }
 
 impl std::fmt::Debug for LearnedShape {
@@ -231,7 +257,7 @@ impl FittedObject {
     pub fn placed(&self) -> PlacedSdf {
         match &self.learned {
             Some(l) => PlacedSdf {
-                sdf: l.traced.clone(),
+                sdf: l.traced(self.category),
                 depth_from_object: self.depth_from_object,
             },
             None => PlacedSdf {
