@@ -54,6 +54,36 @@ impl Default for DepthMirror {
     }
 }
 
+impl DepthMirror {
+    /// Refuses settings no refinement can run with (a `--config` TOML is user input): when
+    /// enabled, a size, gate or RMS not a finite number > 0, a turn outside (0°, 90°].
+    pub fn check(&self) -> Result<(), crate::ReconError> {
+        if !self.enabled {
+            return Ok(());
+        }
+        let positive = [
+            ("min_scale_m", self.min_scale_m),
+            ("radius_rel", self.radius_rel),
+            ("gate_m", self.gate_m),
+            ("max_rms_m", self.max_rms_m),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(crate::ReconError::Config(format!(
+                    "[mirror] {name} = {v}: must be a finite number > 0"
+                )));
+            }
+        }
+        if !(self.max_turn_deg > 0.0 && self.max_turn_deg <= 90.0) {
+            return Err(crate::ReconError::Config(format!(
+                "[mirror] max_turn_deg = {}: must lie in (0, 90]",
+                self.max_turn_deg
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// A window's centroid may lie this fraction of its half-size from the hit (along the surface):
 /// its plane's normal is the surface's at the centroid (on a 2 m sphere, 0.2 instead of 0.1
 /// gave 0.35° instead of 0.23° at the 90th percentile).
@@ -331,6 +361,48 @@ mod tests {
             q(0.9),
             q(1.0)
         );
+    }
+
+    /// Settings no refinement can run with are a clear error naming the field, when enabled.
+    #[test]
+    fn impossible_settings_are_refused() {
+        let on = DepthMirror {
+            enabled: true,
+            ..DepthMirror::default()
+        };
+        assert!(on.check().is_ok());
+        for (bad, field) in [
+            (
+                DepthMirror {
+                    radius_rel: -0.1,
+                    ..on.clone()
+                },
+                "radius_rel",
+            ),
+            (
+                DepthMirror {
+                    gate_m: f64::NAN,
+                    ..on.clone()
+                },
+                "gate_m",
+            ),
+            (
+                DepthMirror {
+                    max_turn_deg: 120.0,
+                    ..on.clone()
+                },
+                "max_turn_deg",
+            ),
+        ] {
+            let e = bad.check().unwrap_err().to_string();
+            assert!(e.contains(field), "{e}");
+            // Off, nothing is used, nothing refused.
+            let off = DepthMirror {
+                enabled: false,
+                ..bad
+            };
+            assert!(off.check().is_ok());
+        }
     }
 
     /// Left alone: rays where the depth disagrees with the fit (beyond the gate), small

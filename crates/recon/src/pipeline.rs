@@ -441,6 +441,7 @@ pub fn reconstruct_human(
     progress: &dyn Progress,
 ) -> Result<Reconstruction, ReconError> {
     progress.stage("reflected rays", 0);
+    cfg.mirror.check()?;
     let rays = reflected_rays(capture, &objects, &pre.mask, cfg);
     let hcfg = cfg.human_settings();
     let (rad, data_term) = radiometry(&pre, &rays, priors.model, &hcfg)?;
