@@ -284,6 +284,25 @@ mod tests {
         );
     }
 
+    /// The interpolant's own gradient against central differences of its values (a sphere:
+    /// not reproduced exactly, so this checks the derivative weights, not the field).
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let b = baked(Arc::new(Sphere { radius: 0.6 }), 12);
+        let mut rng = irmirror_geom::rng::seeded(4, 0);
+        for _ in 0..300 {
+            use rand::Rng;
+            let p = Vector3::from_fn(|_, _| rng.random_range(-0.55..=0.55));
+            let g = b.gradient(&p);
+            let h = 1e-6;
+            let fd = Vector3::from_fn(|k, _| {
+                let e = Vector3::from_fn(|i, _| if i == k { h } else { 0.0 });
+                (b.distance(&(p + e)) - b.distance(&(p - e))) / (2.0 * h)
+            });
+            assert!((g - fd).norm() < 1e-6, "{p:?}: {g:?} vs {fd:?}");
+        }
+    }
+
     /// With a band, the original field answers within it (values and gradients exactly) and the
     /// grid beyond it; the grid's error at cell centres bounds what a band must exceed.
     #[test]
