@@ -57,6 +57,10 @@ pub enum BenchCommand {
         /// The prior stage 1 fits: the two-parameter family, or then the learned DeepSDF prior.
         #[arg(long, value_enum, default_value = "simple")]
         prior: PriorArg,
+        /// Re-reflect large objects' rays off the depth data (the `[mirror]` refinement, its
+        /// defaults) before measuring the reflected-ray angle.
+        #[arg(long)]
+        mirror: bool,
     },
     /// The person's reflection size per capture regime (ideal sensor): median, 10th and 90th
     /// percentiles over seeds, and a histogram PNG.
@@ -128,7 +132,18 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             segment,
             shapes,
             prior,
-        } => crate::bench_objects::run(regime, &shapes, prior.into(), seeds, segment),
+            mirror,
+        } => crate::bench_objects::run(&crate::bench_objects::Settings {
+            regime,
+            shape_sets: &shapes,
+            prior: prior.into(),
+            seeds,
+            segment,
+            mirror: mirror.then(|| irmirror_recon::depth_mirror::DepthMirror {
+                enabled: true,
+                ..Default::default()
+            }),
+        }),
         BenchCommand::Regimes { seeds, first, png } => {
             crate::bench_regimes::run(first, seeds, &png)
         }

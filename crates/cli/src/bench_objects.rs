@@ -16,12 +16,13 @@
 use crate::simulate_cmd::regime_scene;
 use anyhow::{Context, Result};
 use irmirror_body::BodyModel;
-use irmirror_capture::Capture;
+use irmirror_capture::{Capture, Image};
 use irmirror_geom::TriMesh;
 use irmirror_geom::nalgebra::Vector3;
 use irmirror_geom::{Category, PinholeCamera, Rigid3, Similarity3};
+use irmirror_recon::depth_mirror::DepthMirror;
 use irmirror_recon::objects::{ObjectPrior, Stage1Config, reconstruct_objects};
-use irmirror_render::reflect::{Normals, reflect_camera};
+use irmirror_render::reflect::{Normals, ReflectedRays, reflect_camera};
 use irmirror_render::sdf::PlacedSdf;
 use irmirror_render::shapes::Shape;
 use irmirror_render::sphere_trace::TraceParams;
@@ -53,6 +54,9 @@ struct Row {
     /// [`ray_angles_deg`]'s median over the object's pixels; `None` when no pixel meets it in
     /// both the fit and the truth.
     ray_deg: Option<f64>,
+    /// The same over the pixels of the person's reflection (the simulator's mask): where stage
+    /// 2 looks.
+    reflection_ray_deg: Option<f64>,
     time_s: f64,
 }
 
@@ -114,11 +118,15 @@ const HANDLE_SEEN_PX: usize = 3;
 /// What stage 2 sees of stage 1: per true object, over the thermal pixels whose centre ray
 /// meets it and meets a fitted object, the angle between the two reflected rays (degrees; both
 /// with the smoothed normals stage 2 uses). A person 3 m away moves by 5 cm per 1°.
+/// `refine` acts on the fitted rays first (the depth mirror, or nothing). With each angle,
+/// whether its pixel lies in `reflection` (the person's reflection, when given).
 fn ray_angles_deg(
     (camera, depth_from_camera): (&PinholeCamera, &Rigid3<f64>),
     fitted: &[PlacedSdf],
     truth: &[PlacedSdf],
-) -> Vec<Vec<f64>> {
+    reflection: Option<&Image<bool>>,
+    refine: impl FnOnce(&mut ReflectedRays<f64>),
+) -> Vec<Vec<(f64, bool)>> {
     let rays = |objects: &[PlacedSdf]| {
         reflect_camera(
             camera,
@@ -128,7 +136,8 @@ fn ray_angles_deg(
             Normals::Smoothed,
         )
     };
-    let (fit, tru) = (rays(fitted), rays(truth));
+    let (mut fit, tru) = (rays(fitted), rays(truth));
+    refine(&mut fit);
     let mut at = vec![usize::MAX; (fit.width * fit.height) as usize];
     for (i, &p) in fit.pixel.iter().enumerate() {
         at[p as usize] = i;
@@ -140,7 +149,8 @@ fn ray_angles_deg(
             // atan2 of sine and cosine: acos loses the small angles to rounding.
             let (a, b) = (fit.dir[i], tru.dir[j]);
             let angle = a.cross(&b).norm().atan2(a.dot(&b));
-            out[tru.object[j] as usize].push(angle.to_degrees());
+            let seen = reflection.is_some_and(|m| m.data[p as usize]);
+            out[tru.object[j] as usize].push((angle.to_degrees(), seen));
         }
     }
     out
@@ -213,13 +223,27 @@ fn errors(
 /// Simulates `seeds` captures of `regime` (objects from `shapes`), runs stage 1 with `prior` on
 /// each (masks as the capture gives them, or segmentation with `segment`), prints one row per
 /// object and a summary per category.
-pub fn run(
-    regime: Regime,
-    shape_sets: &[Shapes],
-    prior: ObjectPrior,
-    seeds: u64,
-    segment: bool,
-) -> Result<()> {
+/// What `bench objects` runs (the CLI's options).
+pub struct Settings<'a> {
+    pub regime: Regime,
+    pub shape_sets: &'a [Shapes],
+    pub prior: ObjectPrior,
+    pub seeds: u64,
+    /// Segment the depth image instead of using the capture's masks.
+    pub segment: bool,
+    /// Re-reflect large objects' rays off the depth data (`[mirror]`) before the ray angle.
+    pub mirror: Option<DepthMirror>,
+}
+
+pub fn run(s: &Settings) -> Result<()> {
+    let Settings {
+        regime,
+        shape_sets,
+        prior,
+        seeds,
+        segment,
+        ref mirror,
+    } = *s;
     let mut shape_sets = shape_sets.to_vec();
     shape_sets.dedup();
     let model = BodyModel::builtin()?;
@@ -261,10 +285,28 @@ pub fn run(
             .with_context(|| format!("seed {seed}: stage 1"))?;
         let time_s = t0.elapsed().as_secs_f64() / objects.objects.len() as f64;
         let true_world = irmirror_sim::world::World::new(&model, &scene, None)?;
+        let scales: Vec<f64> = objects
+            .objects
+            .iter()
+            .map(|o| o.depth_from_object.scale)
+            .collect();
         let angles = ray_angles_deg(
             (&capture.thermal_camera, &capture.depth_from_thermal),
             &objects.placed(),
             &true_world.objects,
+            Some(&sim.reflection_mask),
+            |rays| {
+                if let Some(m) = mirror {
+                    irmirror_recon::depth_mirror::refine(
+                        rays,
+                        &capture.depth_m,
+                        &capture.depth_camera,
+                        &capture.depth_from_thermal.translation,
+                        &scales,
+                        m,
+                    );
+                }
+            },
         );
         for (k, (truth, true_mesh)) in sim.object_poses.iter().zip(&sim.object_meshes).enumerate() {
             // Segmented objects come largest first: pair each true object with the nearest fit.
@@ -300,7 +342,12 @@ pub fn run(
                 chamfer_mm2: irmirror_sdf::quality::chamfer(&fit_mesh, true_mesh, 5000, 0) * 1e6,
                 side_mm: (category == Category::Car)
                     .then(|| near_side_mm(&fit_mesh, true_mesh, truth)),
-                ray_deg: (!angles[k].is_empty()).then(|| median(angles[k].clone())),
+                ray_deg: (!angles[k].is_empty())
+                    .then(|| median(angles[k].iter().map(|a| a.0).collect())),
+                reflection_ray_deg: {
+                    let on: Vec<f64> = angles[k].iter().filter(|a| a.1).map(|a| a.0).collect();
+                    (!on.is_empty()).then(|| median(on))
+                },
                 time_s,
             });
         }
@@ -310,7 +357,7 @@ pub fn run(
     bar.finish_and_clear();
     std::fs::remove_dir_all(&scratch).ok();
     println!(
-        "stage 1 ({prior:?} prior) on the {regime} regime ({} shapes), seeds 0–{}, {} objects, masks {}, {} threads",
+        "stage 1 ({prior:?} prior) on the {regime} regime ({} shapes), seeds 0–{}, {} objects, masks {}, ray angle {}, {} threads",
         shape_sets
             .iter()
             .map(|s| format!("{s:?}"))
@@ -319,10 +366,17 @@ pub fn run(
         seeds.saturating_sub(1),
         rows.len(),
         if segment { "segmented" } else { "given" },
+        match mirror {
+            Some(m) => format!(
+                "with the mirror from the depth data (window ±{} of the size)",
+                m.radius_rel
+            ),
+            None => "of the fit's mirror".into(),
+        },
         rayon::current_num_threads()
     );
     println!(
-        "\n| seed | shapes | object | translation (mm) | up axis (°) | rotation (°) (handle pixels) | scale (%) | wall (%) | Chamfer (mm²) | car side (mm) | ray angle (°) | time per object (s) |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "\n| seed | shapes | object | translation (mm) | up axis (°) | rotation (°) (handle pixels) | scale (%) | wall (%) | Chamfer (mm²) | car side (mm) | ray angle (°) | on the reflection (°) | time per object (s) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in &rows {
         let rot = r.rotation_deg.map_or("–".to_string(), |x| {
@@ -335,8 +389,11 @@ pub fn run(
         let wall = r.wall_pct.map_or("–".to_string(), |w| format!("{w:.0}"));
         let side = r.side_mm.map_or("–".to_string(), |w| format!("{w:.1}"));
         let ray = r.ray_deg.map_or("–".to_string(), |w| format!("{w:.3}"));
+        let on = r
+            .reflection_ray_deg
+            .map_or("–".to_string(), |w| format!("{w:.3}"));
         println!(
-            "| {} | {} | {} | {:.1} | {:.2} | {rot} | {:.1} | {wall} | {:.2} | {side} | {ray} | {:.2} |",
+            "| {} | {} | {} | {:.1} | {:.2} | {rot} | {:.1} | {wall} | {:.2} | {side} | {ray} | {on} | {:.2} |",
             r.seed,
             set_name(r.shapes),
             r.category,
@@ -351,7 +408,7 @@ pub fn run(
         "\nmedian / 90th percentile / max (goals: ≤ 5 mm, ≤ 3°, ≤ 3 %, ≤ 2 s per object); mug rotation over the mugs whose handle was seen\n"
     );
     println!(
-        "| object | shapes | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | wall (%) | Chamfer (mm²) | car side (mm) | ray angle (°) | time per object (s) |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| object | shapes | n | translation (mm) | up axis (°) | rotation (°) | scale (%) | wall (%) | Chamfer (mm²) | car side (mm) | ray angle (°) | on the reflection (°) | time per object (s) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut groups: Vec<(Category, usize)> = rows
         .iter()
@@ -376,7 +433,7 @@ pub fn run(
             }
         };
         println!(
-            "| {c} | {} | {}{} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {c} | {} | {}{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             set_name(shape_sets[set]),
             sel.len(),
             match sel
@@ -395,6 +452,7 @@ pub fn run(
             col(&|r| Some(r.chamfer_mm2)),
             col(&|r| r.side_mm),
             col(&|r| r.ray_deg),
+            col(&|r| r.reflection_ray_deg),
             col(&|r| Some(r.time_s)),
         );
     }
@@ -530,11 +588,12 @@ mod tests {
             Vector3::new(0.0, -0.26, 3.0),
         )
         .unwrap();
-        let same = super::ray_angles_deg((&camera, &pose), &[car(0.0)], &[car(0.0)]);
+        let same = super::ray_angles_deg((&camera, &pose), &[car(0.0)], &[car(0.0)], None, |_| {});
         assert_eq!(same[0].len(), 32 * 24, "every pixel sees the door");
-        assert!(same[0].iter().all(|a| *a < 1e-9), "{:?}", same[0]);
-        let turned = super::ray_angles_deg((&camera, &pose), &[car(0.5)], &[car(0.0)]);
-        let m = super::median(turned[0].clone());
+        assert!(same[0].iter().all(|a| a.0 < 1e-9 && !a.1), "{:?}", same[0]);
+        let turned =
+            super::ray_angles_deg((&camera, &pose), &[car(0.5)], &[car(0.0)], None, |_| {});
+        let m = super::median(turned[0].iter().map(|a| a.0).collect());
         // Rays off the plane of the turn turn a little less (measured 0.989°).
         assert!((m - 1.0).abs() < 0.02, "median {m}°");
     }

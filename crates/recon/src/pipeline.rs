@@ -225,6 +225,7 @@ pub fn reflected_rays(
         .iter()
         .map(|o| o.depth_from_object.scale)
         .collect();
+    let t0 = std::time::Instant::now();
     let n = crate::depth_mirror::refine(
         &mut rays,
         &capture.depth_m,
@@ -235,8 +236,9 @@ pub fn reflected_rays(
     );
     if cfg.mirror.enabled {
         tracing::debug!(
-            "mirror from the depth data: {n} of {} rays re-reflected",
-            rays.len()
+            "mirror from the depth data: {n} of {} rays re-reflected in {:.2} s",
+            rays.len(),
+            t0.elapsed().as_secs_f64()
         );
     }
     rays
