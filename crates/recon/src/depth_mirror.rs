@@ -592,6 +592,41 @@ mod tests {
         );
     }
 
+    /// The window's moments expanded into its own frame: points on a paraboloid patch
+    /// (h = 0.8 (a² + b²) − 0.3 a b… in its axes), turned and moved anywhere, their sums taken
+    /// directly; the height field fitted about an off-axis point on it reproduces the surface
+    /// and its normal there to rounding.
+    #[test]
+    fn a_quadric_patch_is_fitted_exactly_in_any_frame() {
+        let rot = nalgebra::Rotation3::new(Vector3::new(0.4, -0.9, 0.3));
+        let shift = Vector3::new(0.7, -0.4, 2.3);
+        let h = |a: f64, b: f64| 0.8 * a * a + 0.6 * b * b - 0.3 * a * b;
+        let world = |a: f64, b: f64| rot * Vector3::new(a, b, h(a, b)) + shift;
+        let table = Table::new();
+        let mut m = [0.0; 35];
+        let origin = Vector3::new(0.5, -0.2, 2.0);
+        for i in -20..=20 {
+            for j in -20..=20 {
+                let q = world(f64::from(i) * 0.005, f64::from(j) * 0.005) - origin;
+                for (s, &(x, y, z)) in m.iter_mut().zip(&EXPONENTS) {
+                    *s += q.x.powi(x.into()) * q.y.powi(y.into()) * q.z.powi(z.into());
+                }
+            }
+        }
+        let (a0, b0) = (0.02, -0.015);
+        let centre = world(a0, b0) - origin;
+        let f = HeightField::fit(&m, centre, 0.1, &table).unwrap();
+        // (Σ h² − cᵀb loses the last digits: 1.5e-8 measured.)
+        assert!(f.rms < 1e-6, "{}", f.rms);
+        for (a, b) in [(a0, b0), (-0.05, 0.07), (0.09, 0.0)] {
+            let p = world(a, b) - origin;
+            let (on, n) = f.at(&p);
+            assert!((on - p).norm() < 1e-9, "{:?}", on - p);
+            let truth = rot * Vector3::new(-(1.6 * a - 0.3 * b), -(1.2 * b - 0.3 * a), 1.0);
+            assert!(n.cross(&truth.normalize()).norm() < 1e-8, "{n:?}");
+        }
+    }
+
     /// Settings no refinement can run with are a clear error naming the field, when enabled.
     #[test]
     fn impossible_settings_are_refused() {
