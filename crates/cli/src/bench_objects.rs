@@ -220,9 +220,6 @@ fn errors(
     )
 }
 
-/// Simulates `seeds` captures of `regime` (objects from `shapes`), runs stage 1 with `prior` on
-/// each (masks as the capture gives them, or segmentation with `segment`), prints one row per
-/// object and a summary per category.
 /// What `bench objects` runs (the CLI's options).
 pub struct Settings<'a> {
     pub regime: Regime,
@@ -235,6 +232,9 @@ pub struct Settings<'a> {
     pub mirror: Option<DepthMirror>,
 }
 
+/// Simulates `seeds` captures of `regime` (objects from `shape_sets`), runs stage 1 with
+/// `prior` on each (masks as the capture gives them, or segmentation with `segment`), prints
+/// one row per object and a summary per category.
 pub fn run(s: &Settings) -> Result<()> {
     let Settings {
         regime,
