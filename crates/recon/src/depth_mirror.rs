@@ -12,10 +12,10 @@
 //! the depth points in a ±[`DepthMirror::radius_rel`] × size window about that point, and the ray
 //! is intersected with the quadric and reflected off its normal there. A plane (the first
 //! version) is wrong wherever the surface bends within the window; a quadric in the surface's own
-//! frame is exact to third order (on a sphere its height field has no odd terms), while a
-//! quadric of the inverse depth in image coordinates — symmetric windows, but perspective's
-//! third-order terms — was 0.3° off on a noise-free 2 m sphere with a ±18 cm window (the
-//! height field: 0.002°).
+//! frame follows it to second order with no perspective in the way (on a sphere its height field
+//! has no odd terms at all), while a quadric of the inverse depth in image coordinates —
+//! symmetric windows, but perspective's third-order terms — was 0.3° off on a noise-free 2 m
+//! sphere with a ±18 cm window (the height field: 0.002°).
 //!
 //! Where the data disagree with the fit the fit's ray stays: the depth surface more than
 //! [`DepthMirror::gate_m`] from the fit's hit (another object, the ground), points off their
