@@ -107,6 +107,18 @@ pub struct PosedBody<T: Real> {
     lbs: LbsScratch<T>,
 }
 
+impl<T: Real> PosedBody<T> {
+    /// After [`BodyModel::backward`] or [`BodyModel::backward_pose`]: the loss's derivative as
+    /// the rest body moves along `dir` ([`crate::shape::direction_into`]: `∂L/∂z · dz` for the
+    /// `dz` it was made from; bone tails do not affect posing).
+    pub fn rest_grad_along(&self, dir: &ShapedBody<T>) -> T {
+        let dot = |d: &[Vector3<T>], v: &[Vector3<T>]| {
+            d.iter().zip(v).fold(T::zero(), |s, (a, b)| s + a.dot(b))
+        };
+        dot(&self.d_rest, &dir.vertices) + dot(&self.d_heads, &dir.joint_heads)
+    }
+}
+
 /// Gradients of a scalar loss w.r.t. the body parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BodyGrad<T: Real> {
@@ -359,10 +371,25 @@ impl BodyModel {
         grads: OutputGrads<'_, T>,
         out: &mut BodyGrad<T>,
     ) {
+        self.backward_pose(shaped, pose, posed, grads, out);
+        out.shape.resize(self.rank(), T::zero());
+        shape::shape_vjp(&self.asset, &posed.d_rest, &posed.d_heads, &mut out.shape);
+    }
+
+    /// [`Self::backward`] but for `∂L/∂z` (`out.shape` is left as it was): the rotations' and
+    /// translation's gradients, and in `posed` the rest body's, which
+    /// [`PosedBody::rest_grad_along`] reads along a shape direction — for a caller that fits
+    /// one phenotype slider, the 32 coefficients' VJP (the whole shape basis) is not needed.
+    pub fn backward_pose<T: Real>(
+        &self,
+        shaped: &ShapedBody<T>,
+        pose: &Pose<T>,
+        posed: &mut PosedBody<T>,
+        grads: OutputGrads<'_, T>,
+        out: &mut BodyGrad<T>,
+    ) {
         let a = &self.asset;
-        let (j, r) = (self.n_joints(), self.rank());
-        out.rotations.resize(j, Matrix3::zeros());
-        out.shape.resize(r, T::zero());
+        out.rotations.resize(self.n_joints(), Matrix3::zeros());
         match grads.vertices {
             Some(d) => posed.d_vertices.copy_from_slice(d),
             None => posed
@@ -418,7 +445,6 @@ impl BodyModel {
                 heads: &mut posed.d_heads,
             },
         );
-        shape::shape_vjp(a, &posed.d_rest, &posed.d_heads, &mut out.shape);
     }
 
     /// The posed mesh as an `f32` triangle mesh (frame of the pose's translation).

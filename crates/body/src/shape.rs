@@ -27,10 +27,11 @@ fn v3<T: Real>(p: &[f32; 3]) -> Vector3<T> {
     )
 }
 
-fn apply<T: Real>(mean: &[[f32; 3]], basis: &[f32], z: &[T], out: &mut [Vector3<T>]) {
-    let n = mean.len();
+/// `mean + Σ_r z_r E_r` per row (`mean` = `None`: the sum alone).
+fn apply<T: Real>(mean: Option<&[[f32; 3]]>, basis: &[f32], z: &[T], out: &mut [Vector3<T>]) {
+    let n = out.len();
     out.par_iter_mut().enumerate().for_each(|(i, o)| {
-        let mut p = v3::<T>(&mean[i]);
+        let mut p = mean.map_or_else(Vector3::zeros, |m| v3::<T>(&m[i]));
         for (r, &zr) in z.iter().enumerate() {
             let e = &basis[(r * n + i) * 3..(r * n + i) * 3 + 3];
             p += Vector3::new(
@@ -45,25 +46,38 @@ fn apply<T: Real>(mean: &[[f32; 3]], basis: &[f32], z: &[T], out: &mut [Vector3<
 
 /// Fills `out` with the shape of coefficients `z` (length r, checked by the caller).
 pub fn shape_into<T: Real>(asset: &BodyAsset, z: &[T], out: &mut ShapedBody<T>) {
+    fill(asset, z, true, out);
+}
+
+/// Fills `out` with the rest body's derivative along `dz` (length r): `Σ_i dz_i E_i` over
+/// vertices, joint heads and tails, without the mean. The shape space is linear, so a body
+/// whose coefficients move along `dz` moves along this exactly: a fit that changes one
+/// phenotype slider, piecewise linear in `z`, reshapes by an axpy instead of the whole basis,
+/// and reads that slider's gradient with [`crate::PosedBody::rest_grad_along`].
+pub fn direction_into<T: Real>(asset: &BodyAsset, dz: &[T], out: &mut ShapedBody<T>) {
+    fill(asset, dz, false, out);
+}
+
+fn fill<T: Real>(asset: &BodyAsset, z: &[T], with_mean: bool, out: &mut ShapedBody<T>) {
     out.z.clear();
     out.z.extend_from_slice(z);
     out.vertices.resize(asset.n_vertices(), Vector3::zeros());
     out.joint_heads.resize(asset.n_joints(), Vector3::zeros());
     out.joint_tails.resize(asset.n_joints(), Vector3::zeros());
     apply(
-        &asset.mean_vertices,
+        with_mean.then_some(&asset.mean_vertices[..]),
         &asset.shape_basis_vertices,
         z,
         &mut out.vertices,
     );
     apply(
-        &asset.mean_joint_heads,
+        with_mean.then_some(&asset.mean_joint_heads[..]),
         &asset.shape_basis_joint_heads,
         z,
         &mut out.joint_heads,
     );
     apply(
-        &asset.mean_joint_tails,
+        with_mean.then_some(&asset.mean_joint_tails[..]),
         &asset.shape_basis_joint_tails,
         z,
         &mut out.joint_tails,

@@ -270,6 +270,77 @@ fn backward_matches_finite_differences() {
     }
 }
 
+/// The shape space is linear: the body at `z + t dz` is the body at `z` plus `t` times the
+/// direction of `dz`, and the loss's derivative along it (`backward_pose` +
+/// `rest_grad_along`, no shape VJP) is the full VJP's `∂L/∂z · dz` and the finite difference.
+#[test]
+fn shape_direction_moves_the_body_and_carries_its_gradient() {
+    let m = model();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let probe = Probe::new(m, &mut rng);
+    let z: Vec<f64> = m.shape_coefficients(&test_phenotype()).unwrap();
+    let dz: Vec<f64> = (0..m.rank()).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let mut dir = m.shaped(&z).unwrap();
+    irmirror_body::shape::direction_into(&m.asset, &dz, &mut dir);
+    let t = 0.3;
+    let moved: Vec<f64> = z.iter().zip(&dz).map(|(a, b)| a + t * b).collect();
+    let (at, there) = (m.shaped(&z).unwrap(), m.shaped(&moved).unwrap());
+    let worst = |a: &[Vector3<f64>], b: &[Vector3<f64>], d: &[Vector3<f64>]| {
+        a.iter()
+            .zip(b)
+            .zip(d)
+            .map(|((a, b), d)| (a + d * t - b).norm())
+            .fold(0.0, f64::max)
+    };
+    assert!(worst(&at.vertices, &there.vertices, &dir.vertices) < 1e-12);
+    assert!(worst(&at.joint_heads, &there.joint_heads, &dir.joint_heads) < 1e-12);
+    assert!(worst(&at.joint_tails, &there.joint_tails, &dir.joint_tails) < 1e-12);
+    assert!(
+        dir.vertices.iter().any(|v| v.norm() > 1e-4),
+        "a direction that moves nothing"
+    );
+
+    let rot: Vec<[f64; 3]> = (0..36)
+        .map(|c| [0.1 * (c % 3) as f64, -0.2, 0.05 * (c % 5) as f64])
+        .collect();
+    let tr = Vector3::new(0.1, -0.5, 1.2);
+    let pose = Pose::from_axis_angles(&rot, tr);
+    let grads = OutputGrads {
+        vertices: Some(&probe.gv),
+        joints: Some(&probe.gj),
+        keypoints: Some(&probe.gk),
+    };
+    let empty = || BodyGrad {
+        rotations: vec![],
+        translation: Vector3::zeros(),
+        shape: vec![],
+    };
+    let mut posed = m.posed_buffers();
+    m.pose_into(&at, &pose, &mut posed).unwrap();
+    let mut full = empty();
+    m.backward(&at, &pose, &mut posed, grads, &mut full);
+    let via_vjp: f64 = full.shape.iter().zip(&dz).map(|(g, d)| g * d).sum();
+    let mut part = empty();
+    m.backward_pose(&at, &pose, &mut posed, grads, &mut part);
+    let along = posed.rest_grad_along(&dir);
+    assert!(
+        part.shape.is_empty(),
+        "backward_pose leaves the shape's gradient alone"
+    );
+    assert_eq!(part.translation, full.translation);
+    let h = 1e-6;
+    let step = |s: f64| -> Vec<f64> { z.iter().zip(&dz).map(|(a, b)| a + s * b).collect() };
+    let fd = (probe.loss(m, &step(h), &rot, tr) - probe.loss(m, &step(-h), &rot, tr)) / (2.0 * h);
+    assert!(
+        (along - via_vjp).abs() <= 1e-9 * (1.0 + via_vjp.abs()),
+        "along the direction {along} vs the VJP's {via_vjp}"
+    );
+    assert!(
+        (fd - along).abs() <= 1e-6 * (1.0 + fd.abs()),
+        "finite difference {fd} vs {along}"
+    );
+}
+
 #[test]
 fn backward_with_keypoints_only_matches_a_direct_sum() {
     // ∂(Σ_k c·kp_k)/∂translation = Σ_k c_k, because every keypoint row sums to 1.

@@ -78,6 +78,22 @@ fn decoded_poses_are_rotations() {
             "batch and single decodes differ"
         );
     }
+    // The single decode is the VJP's own f64 forward; in f64 candle's batch agrees with it but
+    // for its Gram–Schmidt's norm floor (√(‖a‖² + 1e-8) against √(‖a‖² + ε²)): ≈ 2e-9.
+    let p64 = PosePrior::builtin(DType::F64).unwrap();
+    let batch = p64.decode_batch(&zs).unwrap();
+    for (z, b) in zs.iter().zip(&batch) {
+        let one = p64.decode(z).unwrap();
+        let worst = one
+            .iter()
+            .zip(b)
+            .map(|(a, c)| (a - c).abs().max())
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 1e-7,
+            "f64 batch and single decodes differ by {worst}"
+        );
+    }
     assert!(prior.decode(&[0.0; 3]).is_err());
     assert!(prior.decode(&[f64::NAN; LATENT]).is_err());
 }

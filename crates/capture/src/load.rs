@@ -308,7 +308,12 @@ impl Capture {
     }
 
     /// The thermal frame as band radiance, W m⁻² sr⁻¹.
+    ///
+    /// One band integral per distinct temperature: a frame in counts has a few thousand, and
+    /// per pixel the integrals cost ≈ 1 s of a 640×512 frame.
     pub fn thermal_radiance(&self) -> Image<f64> {
-        self.thermal_k.map(band_radiance)
+        let mut memo = std::collections::HashMap::new();
+        self.thermal_k
+            .map(|t| *memo.entry(t.to_bits()).or_insert_with(|| band_radiance(t)))
     }
 }

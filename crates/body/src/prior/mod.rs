@@ -20,7 +20,7 @@ pub mod vae;
 
 use candle_core::{DType, Tensor};
 use irmirror_geom::rotation::{
-    axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd, sixd_to_matrix_vjp,
+    axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_sixd, sixd_to_matrix, sixd_to_matrix_vjp,
 };
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector6};
 pub use vae::{JOINTS, LATENT, PoseVae, PriorError};
@@ -80,9 +80,43 @@ impl PosePrior {
         &self.vae
     }
 
-    /// Decodes one latent to 36 rotations (index 0, the root, is the identity).
+    /// Decodes one latent to 36 rotations (index 0, the root, is the identity), in f64 by
+    /// the same forward as [`Self::decode_vjp`]: a stage-2 step decodes one latent, which
+    /// through candle's tensors (and its thread-count lookup per matmul) cost 3 % of a step.
     pub fn decode(&self, z: &[f64]) -> Result<Vec<Matrix3<f64>>, PriorError> {
-        Ok(self.decode_batch(&[z.to_vec()])?.remove(0))
+        Ok(self.decode_taped(z)?.rotations)
+    }
+
+    /// [`Self::decode`], keeping what [`Self::vjp_taped`] needs (one forward per step, not two).
+    pub fn decode_taped(&self, z: &[f64]) -> Result<Decoded, PriorError> {
+        let [a1, a2, six] = self.decoder_forward(z)?;
+        let rotations = std::iter::once(Matrix3::identity())
+            .chain(
+                six.as_slice()
+                    .chunks_exact(6)
+                    .map(|x| sixd_to_matrix(&Vector6::from_column_slice(x))),
+            )
+            .collect();
+        Ok(Decoded {
+            rotations,
+            tape: [a1, a2, six],
+        })
+    }
+
+    /// The decoder's pre-activations `[a1, a2]` and its 6-D output, f64.
+    fn decoder_forward(&self, z: &[f64]) -> Result<[DVector<f64>; 3], PriorError> {
+        if z.len() != LATENT || z.iter().any(|x| !x.is_finite()) {
+            return Err(candle_core::Error::Msg(format!(
+                "the latent must hold {LATENT} finite values, got {}",
+                z.len()
+            ))
+            .into());
+        }
+        let [(w1, b1), (w2, b2), (w3, b3)] = &self.decoder;
+        let a1 = w1 * DVector::from_column_slice(z) + b1;
+        let a2 = w2 * silu(&a1) + b2;
+        let six = w3 * silu(&a2) + b3;
+        Ok([a1, a2, six])
     }
 
     /// Decodes a batch of latents (one candle call) to 36 rotations each (root = identity): the
@@ -130,6 +164,15 @@ impl PosePrior {
         z: &[f64],
         d_rotations: &[Matrix3<f64>],
     ) -> Result<Vec<f64>, PriorError> {
+        self.vjp_taped(&self.decode_taped(z)?, d_rotations)
+    }
+
+    /// [`Self::decode_vjp`] at the latent `decoded` came from.
+    pub fn vjp_taped(
+        &self,
+        decoded: &Decoded,
+        d_rotations: &[Matrix3<f64>],
+    ) -> Result<Vec<f64>, PriorError> {
         let body = match d_rotations.len() {
             36 => &d_rotations[1..],
             35 => d_rotations,
@@ -140,19 +183,8 @@ impl PosePrior {
                 .into());
             }
         };
-        if z.len() != LATENT || z.iter().any(|x| !x.is_finite()) {
-            return Err(candle_core::Error::Msg(format!(
-                "the latent must hold {LATENT} finite values, got {}",
-                z.len()
-            ))
-            .into());
-        }
-        // Forward in f64, keeping the pre-activations.
-        let [(w1, b1), (w2, b2), (w3, b3)] = &self.decoder;
-        let silu = |a: &DVector<f64>| a.map(|x| x / (1.0 + (-x).exp()));
-        let a1 = w1 * DVector::from_column_slice(z) + b1;
-        let a2 = w2 * silu(&a1) + b2;
-        let six = w3 * silu(&a2) + b3;
+        let [a1, a2, six] = &decoded.tape;
+        let [(w1, _), (w2, _), (w3, _)] = &self.decoder;
         // Back through Gram–Schmidt, then the layers; silu'(x) = s (1 + x (1 − s)).
         let mut g_six = DVector::zeros(six.len());
         for (j, g) in body.iter().enumerate() {
@@ -167,8 +199,8 @@ impl PosePrior {
                 g * s * (1.0 + x * (1.0 - s))
             })
         };
-        let g_a2 = dsilu(&a2, w3.tr_mul(&g_six));
-        let g_a1 = dsilu(&a1, w2.tr_mul(&g_a2));
+        let g_a2 = dsilu(a2, w3.tr_mul(&g_six));
+        let g_a1 = dsilu(a1, w2.tr_mul(&g_a2));
         Ok(w1.tr_mul(&g_a1).as_slice().to_vec())
     }
 
@@ -180,6 +212,19 @@ impl PosePrior {
         let (mu, _) = self.vae.encode(&t)?;
         Ok(mu.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
     }
+}
+
+/// One latent's decoding and the decoder's intermediates ([`PosePrior::decode_taped`]).
+#[derive(Clone, Debug)]
+pub struct Decoded {
+    /// The 36 rotations (root = identity).
+    pub rotations: Vec<Matrix3<f64>>,
+    /// The pre-activations `a1`, `a2` and the 6-D output.
+    tape: [DVector<f64>; 3],
+}
+
+fn silu(a: &DVector<f64>) -> DVector<f64> {
+    a.map(|x| x / (1.0 + (-x).exp()))
 }
 
 /// The prior loss `‖z‖²` and its gradient `2z`.
