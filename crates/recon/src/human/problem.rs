@@ -48,7 +48,7 @@ impl HumanProblem<'_> {
         let mut direction = shaped.clone();
         irmirror_body::shape::direction_into(&self.model.asset, &dz_dheight, &mut direction);
         let mean_piece = MeanPiece {
-            dz_dheight: dz_dheight.clone(),
+            dz_dheight,
             shaped: shaped.clone(),
             direction,
         };
@@ -59,7 +59,6 @@ impl HumanProblem<'_> {
         Ok(Scratch {
             shaped,
             height,
-            dz_dheight,
             off_mean: None,
             mean_piece,
             posed: self.model.posed_buffers(),
@@ -119,13 +118,11 @@ impl HumanProblem<'_> {
             axpy(&mut s.joint_heads, &a.joint_heads, &d.joint_heads);
             axpy(&mut s.joint_tails, &a.joint_tails, &d.joint_tails);
             s.z = z;
-            ws.dz_dheight.clone_from(&mean.dz_dheight);
             ws.off_mean = None;
         } else {
             irmirror_body::shape::shape_into(&self.model.asset, &z, &mut ws.shaped);
             let dir = ws.off_mean.get_or_insert_with(|| mean.direction.clone());
             irmirror_body::shape::direction_into(&self.model.asset, &dz, dir);
-            ws.dz_dheight = dz;
         }
         ws.height = h;
         Ok(())
@@ -741,8 +738,6 @@ pub struct Scratch {
     shaped: irmirror_body::ShapedBody<f64>,
     /// The height slider `shaped` was made for.
     height: f64,
-    /// The shape coefficients' derivative in the slider at `height`.
-    dz_dheight: Vec<f64>,
     /// The rest body's derivative in the slider at `height` when it is off the mean's piece.
     off_mean: Option<irmirror_body::ShapedBody<f64>>,
     /// The linear piece of the shape map that holds the mean height.
