@@ -50,10 +50,10 @@ pub fn shape_into<T: Real>(asset: &BodyAsset, z: &[T], out: &mut ShapedBody<T>) 
 }
 
 /// Fills `out` with the rest body's derivative along `dz` (length r): `Σ_i dz_i E_i` over
-/// vertices, joint heads and tails, without the mean. The shape space is linear, so a body
-/// whose coefficients move along `dz` moves along this exactly: a fit that changes one
-/// phenotype slider, piecewise linear in `z`, reshapes by an axpy instead of the whole basis,
-/// and reads that slider's gradient with [`crate::PosedBody::rest_grad_along`].
+/// vertices, joint heads and tails, without the mean (`out.z` = `dz`). The shape space is
+/// linear, so a body whose coefficients move along `dz` moves along this exactly: a fit that
+/// changes one phenotype slider, piecewise linear in `z`, reshapes by an axpy instead of the
+/// whole basis, and reads that slider's gradient with [`crate::PosedBody::rest_grad_along`].
 pub fn direction_into<T: Real>(asset: &BodyAsset, dz: &[T], out: &mut ShapedBody<T>) {
     fill(asset, dz, false, out);
 }

@@ -310,7 +310,7 @@ impl Capture {
     /// The thermal frame as band radiance, W m⁻² sr⁻¹.
     ///
     /// One band integral per distinct temperature: a frame in counts has a few thousand, and
-    /// per pixel the integrals cost ≈ 1 s of a 640×512 frame.
+    /// per pixel the integrals cost ≈ 2 s of a 640×512 frame (the report's preview).
     pub fn thermal_radiance(&self) -> Image<f64> {
         let mut memo = std::collections::HashMap::new();
         self.thermal_k
