@@ -49,10 +49,12 @@ mod observe;
 mod problem;
 pub mod radiometric;
 mod refine;
+mod scratch;
 pub mod search;
 
 pub use edge::edge_distance;
-pub use problem::{Draw, FullEval, Scratch};
+pub use problem::{Draw, FullEval};
+pub use scratch::Scratch;
 
 pub use observe::{Rise, Selection};
 pub use refine::Stratified;

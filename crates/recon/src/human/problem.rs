@@ -1,18 +1,16 @@
 //! The stage-2 loss and its gradient, and one hypothesis' Adam run.
 
 use super::edge::EdgeSampler;
-use super::{
-    Batch, HumanConfig, HumanProblem, HumanState, ROOT_PARAMS, Tangent, phenotype, shaped_body,
-};
+use super::{Batch, HumanConfig, HumanProblem, HumanState, ROOT_PARAMS, Tangent};
 use crate::ReconError;
 use irmirror_body::Pose;
-use irmirror_body::model::{BodyGrad, OutputGrads};
+use irmirror_body::model::OutputGrads;
 use irmirror_capture::Image;
 use irmirror_geom::optim::{Adam, AdamParams, CosineDecay};
 use irmirror_geom::rotation::{axis_angle_to_matrix, axis_angle_to_matrix_vjp};
 use irmirror_render::hard::first_hit;
 use irmirror_render::occupancy::{
-    Culling, Occupancy, OccupancyGrad, OccupancyParams, SoftRenderer, soft_iou_weighted,
+    Culling, Occupancy, OccupancyParams, SoftRenderer, soft_iou_weighted,
 };
 use irmirror_render::reflect::ReflectedRays;
 use nalgebra::{Matrix3, Vector3};
@@ -20,15 +18,12 @@ use rayon::prelude::*;
 
 use super::observe::Selection;
 use super::radiometric::{REGIONS, Radiometry, Scalars, TermInput};
+use super::scratch::Scratch;
 
 /// IRLS rounds of the radiometric scalars' solve per loss evaluation (from the priors' means;
 /// each round solves its weighted least squares exactly). The gradient holds the scalars at
 /// their optimum (envelope theorem): the FD test checks what the rounds leave.
 const SCALAR_SWEEPS: usize = 20;
-
-/// Step of the central difference of the phenotype's shape map in the height slider (the map is
-/// piecewise linear, so this is exact away from its knots and a subgradient on them).
-const HEIGHT_STEP: f64 = 1e-4;
 
 impl HumanProblem<'_> {
     /// The pose of a state (36 rotations; root first).
@@ -37,95 +32,6 @@ impl HumanProblem<'_> {
             rotations: super::joint_rotations(self.prior, st)?,
             translation: st.translation,
         })
-    }
-
-    /// Buffers reused across steps (allocation-free after the first step while the height
-    /// stays; a new height reshapes the body).
-    pub fn scratch(&self) -> Result<Scratch, ReconError> {
-        let height = super::HEIGHT_MEAN;
-        let shaped = shaped_body(self.model, height)?;
-        let dz_dheight = self.dz_dheight(height)?;
-        let mut direction = shaped.clone();
-        irmirror_body::shape::direction_into(&self.model.asset, &dz_dheight, &mut direction);
-        let mean_piece = MeanPiece {
-            dz_dheight,
-            shaped: shaped.clone(),
-            direction,
-        };
-        // The BVH's topology comes from the rest body, whichever state a scratch sees first, so
-        // results do not depend on which thread evaluates which candidate (refits move boxes,
-        // never the tree).
-        let renderer = Some(SoftRenderer::new(&shaped.vertices, &self.model.asset.faces));
-        Ok(Scratch {
-            shaped,
-            height,
-            off_mean: None,
-            mean_piece,
-            posed: self.model.posed_buffers(),
-            renderer,
-            occ_grad: OccupancyGrad::default(),
-            body_grad: BodyGrad {
-                rotations: vec![],
-                translation: Vector3::zeros(),
-                shape: vec![],
-            },
-            d_value: Vec::new(),
-            meet: Meet::default(),
-            scalars: None,
-            data: 0.0,
-        })
-    }
-
-    /// `∂z/∂h`: the shape coefficients' derivative in the height slider.
-    fn dz_dheight(&self, h: f64) -> Result<Vec<f64>, ReconError> {
-        let (lo, hi) = ((h - HEIGHT_STEP).max(0.0), (h + HEIGHT_STEP).min(1.0));
-        let zp = self.model.shape_coefficients(&phenotype(hi))?;
-        let zm = self.model.shape_coefficients(&phenotype(lo))?;
-        Ok(zp
-            .iter()
-            .zip(&zm)
-            .map(|(p, m)| (p - m) / (hi - lo))
-            .collect())
-    }
-
-    /// Reshapes `ws` for height slider `h` (nothing when it already holds it). The shape
-    /// coefficients are piecewise linear in the slider: on the mean's piece (the fits' heights,
-    /// within the prior's 3σ) the body is the mean's plus `h − mean` times its derivative
-    /// exactly, an axpy instead of the 32-coefficient basis, which cost ≈ 8 % of a refinement
-    /// and its VJP as much again. Anchored at the mean, not the last height, so the body at `h`
-    /// does not depend on which states a scratch saw before (determinism).
-    fn set_height(&self, ws: &mut Scratch, h: f64) -> Result<(), ReconError> {
-        if ws.height == h {
-            return Ok(());
-        }
-        let dz = self.dz_dheight(h)?;
-        let z = self.model.shape_coefficients(&phenotype(h))?;
-        let mean = &ws.mean_piece;
-        // The derivative by differences carries rounding of ≈ 1e-12; a knot changes it by O(1).
-        let on_mean_piece = dz
-            .iter()
-            .zip(&mean.dz_dheight)
-            .all(|(a, b)| (a - b).abs() <= 1e-9 * (1.0 + b.abs()));
-        if on_mean_piece {
-            let t = h - super::HEIGHT_MEAN;
-            let axpy = |out: &mut [Vector3<f64>], a: &[Vector3<f64>], d: &[Vector3<f64>]| {
-                for ((o, a), d) in out.iter_mut().zip(a).zip(d) {
-                    *o = a + d * t;
-                }
-            };
-            let (s, a, d) = (&mut ws.shaped, &mean.shaped, &mean.direction);
-            axpy(&mut s.vertices, &a.vertices, &d.vertices);
-            axpy(&mut s.joint_heads, &a.joint_heads, &d.joint_heads);
-            axpy(&mut s.joint_tails, &a.joint_tails, &d.joint_tails);
-            s.z = z;
-            ws.off_mean = None;
-        } else {
-            irmirror_body::shape::shape_into(&self.model.asset, &z, &mut ws.shaped);
-            let dir = ws.off_mean.get_or_insert_with(|| mean.direction.clone());
-            irmirror_body::shape::direction_into(&self.model.asset, &dz, dir);
-        }
-        ws.height = h;
-        Ok(())
     }
 
     /// The stage-2 loss of the body at `at` on `batch`, and the soft IoU. With `grad` (length
@@ -245,8 +151,7 @@ impl HumanProblem<'_> {
         let d_lat = self.prior.vjp_taped(&tape, &bg.rotations)?;
         g[..3].copy_from_slice(bg.translation.as_slice());
         g[3..6].copy_from_slice(d_omega.as_slice());
-        let direction = ws.off_mean.as_ref().unwrap_or(&ws.mean_piece.direction);
-        g[6] = ws.posed.rest_grad_along(direction) + 2.0 * cfg.w_height * e_h / h_sigma;
+        g[6] = ws.posed.rest_grad_along(ws.height_direction()) + 2.0 * cfg.w_height * e_h / h_sigma;
         for (k, (gk, dk)) in g[ROOT_PARAMS..].iter_mut().zip(&d_lat).enumerate() {
             *gk = dk + cfg.w_prior * 2.0 * latent[k];
         }
@@ -733,46 +638,6 @@ pub enum Draw<'a> {
     Fixed(Batch<'a>),
 }
 
-/// Buffers of [`HumanProblem::loss_grad`], reused across steps.
-pub struct Scratch {
-    shaped: irmirror_body::ShapedBody<f64>,
-    /// The height slider `shaped` was made for.
-    height: f64,
-    /// The rest body's derivative in the slider at `height` when it is off the mean's piece.
-    off_mean: Option<irmirror_body::ShapedBody<f64>>,
-    /// The linear piece of the shape map that holds the mean height.
-    mean_piece: MeanPiece,
-    posed: irmirror_body::PosedBody<f64>,
-    renderer: Option<SoftRenderer<f64>>,
-    occ_grad: OccupancyGrad<f64>,
-    body_grad: BodyGrad<f64>,
-    d_value: Vec<f64>,
-    /// Where each batch ray meets the body (radiometric term).
-    meet: Meet,
-    /// The radiometric scalars of the last evaluation (when that term is on).
-    scalars: Option<Scalars>,
-    /// The data term of the last evaluation.
-    data: f64,
-}
-
-/// The shape map's linear piece about [`super::HEIGHT_MEAN`]: its derivative, and the rest
-/// body there with its derivative through the shape basis.
-struct MeanPiece {
-    dz_dheight: Vec<f64>,
-    shaped: irmirror_body::ShapedBody<f64>,
-    direction: irmirror_body::ShapedBody<f64>,
-}
-
-impl Scratch {
-    /// Keeps, from the next evaluation on, the triangle each ray hit at the last one (the hit
-    /// point still moves on its plane). Which triangle a ray hits first changes where one body
-    /// part passes behind another, a jump without a gradient; with it frozen the radiometric
-    /// loss is smooth, which a finite-difference check needs.
-    pub fn freeze_hits(&mut self, frozen: bool) {
-        self.meet.frozen = frozen;
-    }
-}
-
 /// No triangle hit (the ray passes the body).
 const NO_HIT: u32 = u32::MAX;
 
@@ -797,14 +662,14 @@ impl Default for RayHit {
 
 /// The radiometric term's per-ray buffers.
 #[derive(Debug, Default)]
-struct Meet {
+pub(super) struct Meet {
     hits: Vec<RayHit>,
     /// Region shares `β` per ray.
     mix: Vec<[f64; REGIONS]>,
     /// `∂D/∂β` per ray.
     d_mix: Vec<[f64; REGIONS]>,
     /// Keep `hits`' triangles (see [`Scratch::freeze_hits`]).
-    frozen: bool,
+    pub(super) frozen: bool,
 }
 
 /// Where the line `o + t d` crosses the plane of `tri = [a, b, c]`: `(u, v, M)` with

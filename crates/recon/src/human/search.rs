@@ -40,7 +40,8 @@
 //!    batch at half the rates on 1. A larger capture (a car door) keeps the fresh
 //!    draws at the full rates ([`HumanProblem::refine_sample`]).
 
-use super::problem::{Draw, FullEval, Scratch};
+use super::problem::{Draw, FullEval};
+use super::scratch::Scratch;
 use super::{
     Batch, FittedRadiometry, HumanConfig, HumanFit, HumanProblem, HumanState, Hypothesis,
     edge_distance, shaped_body, stature_m, upright_facing,
