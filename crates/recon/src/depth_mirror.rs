@@ -135,6 +135,11 @@ fn monomial(i: u8, j: u8, k: u8) -> usize {
         .expect("degree ≤ 4")
 }
 
+/// The monomials of [`EXPONENTS`] at `q`: a point's contribution to the moments.
+fn monomials(q: &Vector3<f64>) -> Poly {
+    EXPONENTS.map(|(i, j, k)| q.x.powi(i.into()) * q.y.powi(j.into()) * q.z.powi(k.into()))
+}
+
 /// A polynomial of degree ≤ 4 in three variables, by [`EXPONENTS`].
 type Poly = [f64; 35];
 
@@ -208,8 +213,8 @@ impl Moments {
             for x in 0..w {
                 if let Some(p) = point(x, y) {
                     let q = p - origin;
-                    for (r, &(i, j, k)) in row.iter_mut().zip(&EXPONENTS) {
-                        *r += q.x.powi(i.into()) * q.y.powi(j.into()) * q.z.powi(k.into());
+                    for (r, v) in row.iter_mut().zip(monomials(&q)) {
+                        *r += v;
                     }
                 }
                 let above = sums[y * (w + 1) + x + 1];
@@ -608,8 +613,8 @@ mod tests {
         for i in -20..=20 {
             for j in -20..=20 {
                 let q = world(f64::from(i) * 0.005, f64::from(j) * 0.005) - origin;
-                for (s, &(x, y, z)) in m.iter_mut().zip(&EXPONENTS) {
-                    *s += q.x.powi(x.into()) * q.y.powi(y.into()) * q.z.powi(z.into());
+                for (s, v) in m.iter_mut().zip(monomials(&q)) {
+                    *s += v;
                 }
             }
         }
