@@ -31,7 +31,7 @@
 //! normal; eight for a mug, whose handle's side is otherwise often missed) × starting shapes
 //! (two proportions; a bowl three walls as well), each run's best iterate kept. Then every run
 //! is polished by Levenberg–Marquardt on the same loss written as residuals (`polish_iterations`
-//! steps; pose Jacobian analytic, shape columns by central differences) and the best run kept:
+//! steps; its Jacobian as below) and the best run kept:
 //! the depth camera barely sees a bowl's wall, so the loss is nearly flat along wall ↔ cut ↔
 //! scale, where Adam's per-coordinate steps wander and stop wherever the schedule ends
 //! (held-out bowls fitted 1.5–2× too thick, their lips mirroring the person up to 52 cm off;
@@ -40,8 +40,14 @@
 //! depth points one of the three best runs' cup leaves unexplained (a 2 mm handle tube a few
 //! pixels wide has no gradient towards points 20° away, so all eight yaws can miss it; from the
 //! best run alone, a tuning-set mug stayed 24 % too large). Rotation and translation gradients
-//! are analytic (chain rule through the SDF gradient); shape gradients are central differences
-//! (2 parameters).
+//! are analytic (chain rule through the SDF gradient). Adam takes the 2 shape parameters'
+//! by central differences of the whole loss, one parameter per step in turn (both every step
+//! re-traced every rendered ray four times, two thirds of stage 1's time); the polish's
+//! Jacobian by the chain rule through per-point differences of the SDF (`loss::ShapeDiff`; at a
+//! rendered ray's hit by the implicit function theorem), which misses the rendered depth's
+//! jumps across a rim — the wall's evidence Adam needs from afar, not the polish near a
+//! minimum (measured in README, "Stage 1's shape gradient"). A mug also gets one restart from
+//! the best run with its height set to the observed top's (`fit::height_restart`).
 //!
 //! Files: [`family`] (shape families), [`observation`] (what a fit sees), [`loss`] (the loss,
 //! its gradient and its residuals), [`fit`] (Adam restarts, the polish; the learned prior),
