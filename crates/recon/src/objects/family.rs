@@ -69,6 +69,13 @@ impl Family {
         }
     }
 
+    /// The unit-box coordinate of parameter `k` at value `x` (clamped to its range): the
+    /// inverse of [`Self::shape`]'s map.
+    pub(super) fn unit(self, k: usize, x: f64) -> f64 {
+        let (lo, hi) = self.ranges()[k];
+        ((x - lo) / (hi - lo)).clamp(0.0, 1.0)
+    }
+
     /// The category's typical metric size as `(ln scale, σ of ln scale)`, where known and
     /// needed: a car seen from its side fills the depth image, so nothing in the data fixes its
     /// length, and proportions trade against scale (measured: 21–30 % too small, 5–7° reflected-

@@ -372,29 +372,29 @@ fn height_restart(
     let mug = family.shape(&st.u).mug()?;
     let plane = ground.plane.as_ref()?;
     let mut heights: Vec<f64> = obs.surface.iter().map(|p| plane.height(p)).collect();
-    heights.sort_by(f64::total_cmp);
+    if heights.is_empty() {
+        return None;
+    }
     // The 99th percentile: a stray depth pixel is not the rim.
-    let top = *heights.get(heights.len() * 99 / 100)?;
+    let k = heights.len() * 99 / 100;
+    let top = *heights.select_nth_unstable_by(k, f64::total_cmp).1;
     let s = st.log_scale.exp();
     let (radius, half) = (mug.radius * s, mug.half_height * s);
     if (2.0 * half - top).abs() < 1e-3 || radius <= 0.0 || top <= 0.0 {
         return None;
     }
-    // Shape::mug: radius ρ = 0.9 / √(1 + a²) / 1.2 and half height a·ρ (object units), so a
-    // top of height H at radius R has a = H / 2R.
-    let (lo, hi) = (0.6, 1.6);
-    let aspect = (top / (2.0 * radius)).clamp(lo, hi);
-    let u0 = (aspect - lo) / (hi - lo);
-    let rho = 0.9 / (1.0 + aspect * aspect).sqrt() / 1.2;
-    let scale = radius / rho;
+    // A mug's half height is its aspect times its radius: a top of height H at radius R has
+    // aspect H / 2R. The wall from the middle of its range: in the tall basin it runs to a bound.
+    let u = [family.unit(0, top / (2.0 * radius)), 0.5];
+    let fitted = family.shape(&u).mug()?;
+    let scale = radius / fitted.radius;
     // The base stays where it is.
     let axis = st.rotation * Vector3::y();
     let base = st.translation - axis * half;
     Some(State {
-        translation: base + axis * (aspect * rho * scale),
+        translation: base + axis * (fitted.half_height * scale),
         log_scale: scale.ln(),
-        // The wall from the middle of its range: in the tall basin it runs to a bound.
-        u: [u0, 0.5],
+        u,
         ..*st
     })
 }
