@@ -22,6 +22,7 @@ pub mod mesh_sdf;
 pub mod net;
 pub mod placed;
 pub mod quality;
+mod shared;
 pub mod train;
 pub mod unseen;
 mod var_adam;

@@ -13,10 +13,12 @@
 //!
 //! Files are `safetensors` (f32) with string metadata (category, command, seed, figures). The
 //! frozen network evaluates in f64 (weights widened at load) with a hand-written reverse pass
-//! for ∂f/∂p and ∂f/∂z; training and batched inference use candle (see `train`, `infer`).
+//! for ∂f/∂p and ∂f/∂z; training and latent inference use candle (see `train`, `infer`),
+//! batched evaluation and the placed fit the split layers of `shared.rs`.
 
 use crate::SdfError;
 use crate::families::Category;
+use crate::shared::SharedLatentNet;
 use candle_core::{Device, Tensor};
 use irmirror_render::baked::BakedSdf;
 use nalgebra::Vector3;
@@ -50,7 +52,7 @@ pub struct SdfNet {
     /// Hidden width W.
     pub width: usize,
     /// Per layer: weights (row-major fan_out × fan_in) and biases.
-    weights: Vec<(Vec<f64>, Vec<f64>)>,
+    pub(crate) weights: Vec<(Vec<f64>, Vec<f64>)>,
     /// Codes of the training shapes (rows of length L).
     pub train_latents: Vec<Vec<f64>>,
     /// Free-form provenance (command, seed, figures).
@@ -278,7 +280,8 @@ impl SdfNet {
             .collect()
     }
 
-    /// `f(z, p)` for many points at once (candle, f32, chunks of 32k points).
+    /// `f(z, p)` for many points at once (f32, the shared latent's split layers: see
+    /// `shared.rs`; points in parallel chunks).
     pub fn eval_batch(&self, z: &[f64], points: &[Vector3<f64>]) -> Result<Vec<f64>, SdfError> {
         if z.len() != self.latent_dim {
             return Err(SdfError::Invalid(format!(
@@ -287,35 +290,9 @@ impl SdfNet {
                 self.latent_dim
             )));
         }
-        let dev = Device::Cpu;
-        let layers = self.tensors(&dev)?;
-        let zt = Tensor::from_vec(
-            z.iter().map(|v| *v as f32).collect::<Vec<f32>>(),
-            (1, self.latent_dim),
-            &dev,
-        )?;
-        let mut out = Vec::with_capacity(points.len());
-        for chunk in points.chunks(32_768) {
-            let m = chunk.len();
-            let p: Vec<f32> = chunk
-                .iter()
-                .flat_map(|q| [q.x as f32, q.y as f32, q.z as f32])
-                .collect();
-            let x = Tensor::cat(
-                &[
-                    &zt.broadcast_as((m, self.latent_dim))?,
-                    &Tensor::from_vec(p, (m, 3), &dev)?,
-                ],
-                1,
-            )?;
-            out.extend(
-                forward(&layers, &x)?
-                    .to_vec1::<f32>()?
-                    .into_iter()
-                    .map(f64::from),
-            );
-        }
-        Ok(out)
+        Ok(SharedLatentNet::<f32>::new(self)
+            .forward(z, points, false)
+            .0)
     }
 
     /// Mean of the training latents (the starting point of latent inference).

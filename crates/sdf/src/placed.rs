@@ -1,6 +1,9 @@
 //! Fitting a prior's shape *and* its placement to depth points (stage 1 with a learned prior,
 //! issue 7): the latent `z` and the similarity `depth_from_object` (R, t, s) together, by Adam
-//! through the network with candle's reverse mode.
+//! through the network: its f32 forward and reverse by hand (`shared.rs`), the loss and its chain
+//! rule to the placement in f64 here. [`loss_and_gradient`] computes the same loss by candle's
+//! reverse mode in f64 (what the fit used until session 49, 2.5× slower per object): the
+//! reference the hand-written gradient is tested against.
 //!
 //! Loss, lengths in units of `unit_m` (the object's size, so one schedule fits a mug and a car):
 //! * surface points: Huber of the metric signed distance `s · f(z, Rᵀ(p − t)/s)`;
@@ -16,10 +19,10 @@
 
 use crate::SdfError;
 use crate::net::{self, SdfNet};
-use crate::var_adam::VarAdam;
+use crate::shared::{Activation, SharedLatentNet};
 use candle_core::{DType, Device, Tensor, Var};
 use irmirror_geom::Similarity3;
-use irmirror_geom::optim::CosineDecay;
+use irmirror_geom::optim::{Adam, AdamParams, CosineDecay};
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use nalgebra::{Matrix3, Vector3};
 use rand::Rng;
@@ -282,7 +285,10 @@ fn check(
 }
 
 /// Fits latent and placement of `net`'s shape to `obs`, from `init` (normalised object frame →
-/// depth frame) and `latent` (e.g. the prior's mean latent).
+/// depth frame) and `latent` (e.g. the prior's mean latent). The network runs in f32 with the
+/// hand-written reverse pass of [`SharedLatentNet`]; the loss and its chain rule to the
+/// placement in f64 ([`hand_loss`]; [`loss_and_gradient`], candle's reverse mode, is the
+/// reference its test compares with).
 pub fn fit_placed(
     net: &SdfNet,
     obs: &PlacedObservation,
@@ -291,26 +297,31 @@ pub fn fit_placed(
     cfg: &PlacedFitConfig,
 ) -> Result<PlacedFit, SdfError> {
     check(net, obs, init, latent)?;
-    let dt = DType::F32;
-    let layers = net.tensors(&Device::Cpu)?;
-    let v = vars(latent, dt)?;
-    // (group, part of the placement: frozen during the latent-only steps)
-    let mut groups = [
-        (VarAdam::new(&v.z, cfg.lr_latent), false),
-        (VarAdam::new(&v.delta, cfg.lr_rotation), true),
-        (VarAdam::new(&v.tau, cfg.lr_translation), true),
-        (VarAdam::new(&v.log_s, cfg.lr_scale), true),
+    let split = SharedLatentNet::<f32>::new(net);
+    let l = latent.len();
+    // One Adam per group, each counting its own steps (the placement's start when it is
+    // released); ε = 1e-8 as candle's AdamW, which this fit used before.
+    let params = AdamParams {
+        eps: 1e-8,
+        ..AdamParams::default()
+    };
+    let rates = [
+        cfg.lr_latent,
+        cfg.lr_rotation,
+        cfg.lr_translation,
+        cfg.lr_scale,
     ];
-    let schedule = CosineDecay { floor: 0.05 };
-    let mut frame = Frame {
-        net: &layers,
+    let sizes = [l, 3, 3, 1];
+    let mut adams = sizes.map(|n| Adam::new(n, params));
+    let mut state = HandState {
         r0: init.rotation,
         t0: init.translation,
         s0: init.scale,
-        obs,
-        cfg,
-        dtype: dt,
+        z: latent.to_vec(),
+        tau: Vector3::zeros(),
+        log_s: 0.0,
     };
+    let schedule = CosineDecay { floor: 0.05 };
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 13);
     let draw = |pts: &[Vector3<f64>], rng: &mut irmirror_geom::rng::Rng| -> Vec<Vector3<f64>> {
         if pts.len() <= cfg.batch {
@@ -323,6 +334,7 @@ pub fn fit_placed(
     };
     let total = cfg.latent_steps + cfg.steps;
     let mut curve = Vec::with_capacity(total);
+    let mut step_buf = vec![0.0; l];
     for step in 0..total {
         let joint = step >= cfg.latent_steps;
         let (k, n) = if joint {
@@ -336,55 +348,147 @@ pub fn fit_placed(
             draw(obs.free, &mut rng),
             draw(obs.inside, &mut rng),
         );
-        let loss = frame.loss(&v, &surface, &free, &inside, obs.support)?;
-        let value = scalar(&loss)?;
+        let sets = [&surface[..], &free[..], &inside[..], obs.support];
+        let (value, grad) = hand_loss(&split, obs, cfg, &state, sets, true);
         if !value.is_finite() {
             return Err(SdfError::Invalid(format!(
                 "placed-shape fit diverged at step {step}"
             )));
         }
         curve.push(value);
-        let grads = loss.backward()?;
-        for (group, placement) in &mut groups {
-            if *placement && !joint {
+        let grad = grad.expect("asked for");
+        let mut offset = 0;
+        for (g, (adam, (&size, &rate))) in
+            adams.iter_mut().zip(sizes.iter().zip(&rates)).enumerate()
+        {
+            let part = &grad[offset..offset + size];
+            offset += size;
+            if g > 0 && !joint {
                 continue;
             }
-            group.step(&grads, decay)?;
+            let st = &mut step_buf[..size];
+            adam.step(part, &vec![rate; size], decay, st);
+            match g {
+                0 => state.z.iter_mut().zip(st.iter()).for_each(|(z, s)| *z -= s),
+                // δ ← −step, folded into R₀ (δ is zero again at the next step).
+                1 => state.r0 *= axis_angle_to_matrix(&-Vector3::new(st[0], st[1], st[2])),
+                2 => state.tau -= Vector3::new(st[0], st[1], st[2]),
+                _ => state.log_s -= st[0],
+            }
         }
-        // Fold the rotation step into R₀.
-        let d = v
-            .delta
-            .as_tensor()
-            .to_dtype(DType::F64)?
-            .flatten_all()?
-            .to_vec1::<f64>()?;
-        frame.r0 *= axis_angle_to_matrix(&Vector3::new(d[0], d[1], d[2]));
-        v.delta.set(&tensor(vec![0.0; 3], &[1, 3], dt)?)?;
     }
-    let loss = scalar(&frame.loss(&v, obs.surface, obs.free, obs.inside, obs.support)?)?;
-    let z =
-        v.z.as_tensor()
-            .to_dtype(DType::F64)?
-            .flatten_all()?
-            .to_vec1::<f64>()?;
-    let tau = v
-        .tau
-        .as_tensor()
-        .to_dtype(DType::F64)?
-        .flatten_all()?
-        .to_vec1::<f64>()?;
-    let log_s = scalar(&v.log_s.as_tensor().flatten_all()?.get(0)?)?;
+    let sets = [obs.surface, obs.free, obs.inside, obs.support];
+    let (loss, _) = hand_loss(&split, obs, cfg, &state, sets, false);
     let depth_from_object = Similarity3 {
-        rotation: frame.r0,
-        translation: frame.t0 + Vector3::new(tau[0], tau[1], tau[2]) * obs.unit_m,
-        scale: frame.s0 * log_s.exp(),
+        rotation: state.r0,
+        translation: state.t0 + state.tau * obs.unit_m,
+        scale: state.s0 * state.log_s.exp(),
     };
     Ok(PlacedFit {
-        latent: z,
+        latent: state.z,
         depth_from_object,
         loss,
         curve,
     })
+}
+
+/// The fit's variables at `δ = 0`: rotation `R₀`, translation `t₀ + τ · unit_m`, scale
+/// `s₀ · exp(log_s)`, latent `z`.
+struct HandState {
+    r0: Matrix3<f64>,
+    t0: Vector3<f64>,
+    s0: f64,
+    z: Vec<f64>,
+    tau: Vector3<f64>,
+    log_s: f64,
+}
+
+/// The loss [`loss_and_gradient`] computes, at `δ = 0`, on the point sets `[surface, free,
+/// inside, support]`, and (with `want`) its gradient `[∂z…, ∂δ (3), ∂τ (3), ∂ln s]`. With
+/// `q = R₀ᵀ (p − t) / s` (`M = R₀ (I + [δ]×)` at δ = 0) and `d = s f(z, q) / u`:
+/// `∂q/∂δ = [q]×`, `∂q/∂τ = −R₀ᵀ u / s`, `∂d/∂ln s = d − (s/u) ∇f · q`.
+fn hand_loss<T: Activation>(
+    net: &SharedLatentNet<T>,
+    obs: &PlacedObservation,
+    cfg: &PlacedFitConfig,
+    st: &HandState,
+    sets: [&[Vector3<f64>]; 4],
+    want: bool,
+) -> (f64, Option<Vec<f64>>) {
+    let u = obs.unit_m;
+    let (t, s) = (st.t0 + st.tau * u, st.s0 * st.log_s.exp());
+    let q: Vec<Vector3<f64>> = sets
+        .iter()
+        .flat_map(|set| set.iter())
+        .map(|p| st.r0.tr_mul(&(p - t)) / s)
+        .collect();
+    let (f, pass) = net.forward(&st.z, &q, want);
+    let d: Vec<f64> = f.iter().map(|f| s * f / u).collect();
+    // ∂L/∂d per point, and the loss, set by set.
+    let mut gd = vec![0.0; d.len()];
+    let mut loss = 0.0;
+    let mut start = 0;
+    let h = cfg.huber;
+    for (k, set) in sets.iter().enumerate() {
+        let n = set.len();
+        let range = start..start + n;
+        start += n;
+        if n == 0 {
+            continue;
+        }
+        let inv = 1.0 / n as f64;
+        for i in range {
+            let di = d[i];
+            let (value, slope) = match k {
+                // Huber: ½ c²/h + (|d| − c), c = min(|d|, h).
+                0 => {
+                    let (a, c) = (di.abs(), di.abs().min(h));
+                    (0.5 * c * c / h + (a - c), di.signum() * c / h)
+                }
+                1 if di < 0.0 => (-di * cfg.w_free, -cfg.w_free),
+                2 if di > 0.0 => (di * cfg.w_free, cfg.w_free),
+                3 if di < 0.0 => (-di * cfg.w_support, -cfg.w_support),
+                _ => (0.0, 0.0),
+            };
+            loss += value * inv;
+            gd[i] = slope * inv;
+        }
+    }
+    let y = Vector3::y();
+    let mut g_delta = Vector3::zeros();
+    let mut g_log_s = 0.0;
+    if let Some(up) = obs.up {
+        let e = st.r0 * y - up;
+        loss += cfg.w_up * e.norm_squared();
+        g_delta += y.cross(&st.r0.tr_mul(&e)) * (2.0 * cfg.w_up);
+    }
+    if let Some((mean, sigma)) = obs.scale_prior {
+        let zs = (st.log_s + st.s0.ln() - mean) / sigma;
+        loss += 1e-3 * zs * zs;
+        g_log_s += 2e-3 * zs / sigma;
+    }
+    loss += cfg.latent_reg * st.z.iter().map(|v| v * v).sum::<f64>();
+    let Some(pass) = pass else {
+        return (loss, None);
+    };
+    let gf: Vec<f64> = gd.iter().map(|g| g * s / u).collect();
+    let (gq, gz_net) = net.backward(&pass, &gf);
+    let mut g_tau_obj = Vector3::zeros();
+    for i in 0..q.len() {
+        g_delta += gq[i].cross(&q[i]);
+        g_tau_obj += gq[i];
+        g_log_s += gd[i] * d[i] - gq[i].dot(&q[i]);
+    }
+    let g_tau = st.r0 * g_tau_obj * (-u / s);
+    let mut grad: Vec<f64> = gz_net
+        .iter()
+        .zip(&st.z)
+        .map(|(g, z)| g + 2.0 * cfg.latent_reg * z)
+        .collect();
+    grad.extend(g_delta.iter());
+    grad.extend(g_tau.iter());
+    grad.push(g_log_s);
+    (loss, Some(grad))
 }
 
 /// A placement relative to the initial similarity: rotation `R₀ exp([δ]×)`, translation
@@ -441,4 +545,126 @@ pub fn loss_and_gradient(
         g.extend(gt.flatten_all()?.to_vec1::<f64>()?);
     }
     Ok((scalar(&loss)?, g))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::families::{Category, FamilyShape};
+
+    /// The hand-written loss and gradient (the fit's) against candle's reverse mode of the same
+    /// loss in f64 (`loss_and_gradient`, itself FD-tested in `tests/placed.rs`), against central
+    /// differences, and in f32 (what the fit runs) within f32's rounding — with every term
+    /// active: Huber in both branches, the hinges on, the up and scale priors off their minima.
+    #[test]
+    fn hand_gradient_matches_candle_and_finite_differences() {
+        let net = SdfNet::builtin(Category::Mug).expect("shipped prior");
+        let shape = FamilyShape::sample(Category::Mug, &mut irmirror_geom::rng::seeded(4, 77))
+            .expect("a mug");
+        let mesh = shape.mesh(24);
+        let truth = Similarity3 {
+            rotation: axis_angle_to_matrix(&Vector3::new(-1.7, 0.4, 0.2)),
+            translation: Vector3::new(0.03, -0.01, 0.5),
+            scale: 0.08,
+        };
+        let surface: Vec<Vector3<f64>> = mesh
+            .vertices
+            .iter()
+            .step_by(5)
+            .map(|v| truth.transform_point(&Vector3::new(v[0], v[1], v[2]).map(f64::from)))
+            .collect();
+        let c = truth.translation;
+        let free: Vec<Vector3<f64>> = surface.iter().map(|p| c + (p - c) * 1.05).collect();
+        let inside: Vec<Vector3<f64>> = surface.iter().map(|p| c + (p - c) * 0.9).collect();
+        let support: Vec<Vector3<f64>> = (0..25)
+            .map(|i| c + Vector3::new((i % 5) as f64 - 2.0, -1.0, (i / 5) as f64 - 2.0) * 0.02)
+            .collect();
+        let obs = PlacedObservation {
+            surface: &surface,
+            free: &free,
+            inside: &inside,
+            support: &support,
+            up: Some(Vector3::new(0.1, -0.95, -0.2).normalize()),
+            unit_m: 0.08,
+            scale_prior: Some((0.08f64.ln(), 0.1)),
+        };
+        let init = Similarity3 {
+            rotation: truth.rotation * axis_angle_to_matrix(&Vector3::new(0.08, -0.05, 0.1)),
+            translation: truth.translation + Vector3::new(0.004, -0.003, 0.002),
+            scale: 0.085,
+        };
+        let z: Vec<f64> = net
+            .mean_latent()
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.02 * (i as f64 * 0.7).sin())
+            .collect();
+        let (tau, log_s) = (Vector3::new(0.02, 0.01, -0.03), 0.04);
+        let cfg = PlacedFitConfig::default();
+        let state = |z: &[f64], tau: Vector3<f64>, log_s: f64, r0: Matrix3<f64>| HandState {
+            r0,
+            t0: init.translation,
+            s0: init.scale,
+            z: z.to_vec(),
+            tau,
+            log_s,
+        };
+        let sets = [&surface[..], &free[..], &inside[..], &support[..]];
+        let split = SharedLatentNet::<f64>::new(&net);
+        let st = state(&z, tau, log_s, init.rotation);
+        let (loss, grad) = hand_loss(&split, &obs, &cfg, &st, sets, true);
+        let grad = grad.expect("asked for");
+        let offset = PlacementOffset {
+            delta: Vector3::zeros(),
+            tau,
+            log_s,
+        };
+        let (ref_loss, ref_grad) =
+            loss_and_gradient(&net, &obs, &init, &z, &offset, &cfg).expect("reference");
+        assert!(
+            (loss - ref_loss).abs() < 1e-10,
+            "loss {loss} for {ref_loss}"
+        );
+        let scale = ref_grad.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        for (k, (g, r)) in grad.iter().zip(&ref_grad).enumerate() {
+            assert!((g - r).abs() < 1e-9 * scale, "∂{k}: {g} for {r}");
+        }
+        // Central differences: the latent, δ (as R₀ exp([h e_k]×), equal to first order), τ, ln s.
+        let l = z.len();
+        let eval = |st: &HandState| hand_loss(&split, &obs, &cfg, st, sets, false).0;
+        let h = 1e-6;
+        for k in [0, 7, l, l + 1, l + 2, l + 3, l + 5, l + 6] {
+            let moved = |sign: f64| {
+                let (mut z2, mut tau2, mut r0) = (z.clone(), tau, init.rotation);
+                let mut ls2 = log_s;
+                match k {
+                    k if k < l => z2[k] += sign * h,
+                    k if k < l + 3 => {
+                        let mut e = Vector3::zeros();
+                        e[k - l] = sign * h;
+                        r0 *= axis_angle_to_matrix(&e);
+                    }
+                    k if k < l + 6 => tau2[k - l - 3] += sign * h,
+                    _ => ls2 += sign * h,
+                }
+                eval(&state(&z2, tau2, ls2, r0))
+            };
+            let fd = (moved(1.0) - moved(-1.0)) / (2.0 * h);
+            assert!(
+                (fd - grad[k]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "∂{k}: {} for {fd}",
+                grad[k]
+            );
+        }
+        // f32 (the fit's network): the same within its rounding.
+        let split32 = SharedLatentNet::<f32>::new(&net);
+        let (loss32, grad32) = hand_loss(&split32, &obs, &cfg, &st, sets, true);
+        assert!(
+            (loss32 - loss).abs() < 1e-5 * loss.abs().max(1.0),
+            "f32 loss {loss32}"
+        );
+        for (k, (g, r)) in grad32.expect("asked for").iter().zip(&grad).enumerate() {
+            assert!((g - r).abs() < 1e-3 * scale, "f32 ∂{k}: {g} for {r}");
+        }
+    }
 }

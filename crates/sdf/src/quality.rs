@@ -54,7 +54,7 @@ pub struct HeldOutFigures {
     pub inference_s: f64,
     /// Single-point value + gradient evaluations per second on all cores ([`LatentSdf`]).
     pub points_per_s: f64,
-    /// Batched value evaluations per second (candle).
+    /// Batched value evaluations per second ([`SdfNet::eval_batch`]; candle until session 49).
     pub batched_points_per_s: f64,
 }
 

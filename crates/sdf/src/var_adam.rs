@@ -1,6 +1,7 @@
 //! The shared [`Adam`] of `irmirror_geom::optim` applied to a candle variable: one parameter
-//! group per variable, with its own learning rate and step count. The placed fit and latent
-//! inference step with it; gradients come from candle's reverse mode, the moments live in f64.
+//! group per variable, with its own learning rate and step count. Latent inference steps with
+//! it (the placed fit steps the same `Adam` on its hand-written gradient); gradients come from
+//! candle's reverse mode, the moments live in f64.
 
 use crate::SdfError;
 use candle_core::backprop::GradStore;

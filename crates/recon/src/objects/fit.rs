@@ -498,10 +498,15 @@ pub fn fit_learned(
         .map(|v| f64::from(v[1]))
         .fold(f64::INFINITY, f64::min);
     let d = placed.depth_from_object;
-    let mean = obs
+    let local: Vec<Vector3<f64>> = obs
         .surface
         .iter()
-        .map(|p| (d.scale * field.value_grad(&d.inverse_transform_point(p)).0).abs())
+        .map(|p| d.inverse_transform_point(p))
+        .collect();
+    let mean = net
+        .eval_batch(&placed.latent, &local)?
+        .iter()
+        .map(|f| (d.scale * f).abs())
         .sum::<f64>()
         / obs.surface.len() as f64;
     let mut curve = fit.loss_curve;
