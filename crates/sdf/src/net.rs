@@ -386,6 +386,9 @@ pub struct LatentSdf {
     pub latent: Vec<f64>,
     bias0: Vec<f64>,
     bias2: Vec<f64>,
+    /// The hidden `W × W` weights of layers 1, 2 (its hidden columns) and 3, transposed
+    /// (input-major), for [`mat_vec`].
+    hidden_t: [Vec<f64>; 3],
 }
 
 impl LatentSdf {
@@ -411,11 +414,17 @@ impl LatentSdf {
         };
         let bias0 = fold(0, l + 3, 0);
         let bias2 = fold(2, w + l + 3, w);
+        let transpose = |k: usize, n_in: usize| -> Vec<f64> {
+            let wt = &net.weights[k].0;
+            (0..w * w).map(|j| wt[(j % w) * n_in + j / w]).collect()
+        };
+        let hidden_t = [transpose(1, w), transpose(2, w + l + 3), transpose(3, w)];
         Ok(Self {
             net,
             latent: z.to_vec(),
             bias0,
             bias2,
+            hidden_t,
         })
     }
 
@@ -439,6 +448,38 @@ impl LatentSdf {
         Ok(baked.with_band(band))
     }
 
+    /// Signed distance alone: [`Self::value_grad`]'s forward pass with the same arithmetic (the
+    /// same value to the bit), without SiLU's slopes and the reverse pass — half the work, which
+    /// is what sphere tracing's steps need.
+    pub fn value(&self, p: &Vector3<f64>) -> f64 {
+        let (l, w) = (self.net.latent_dim, self.net.width);
+        let wts = &self.net.weights;
+        let (n0, n2) = (l + 3, w + l + 3);
+        let p_cols = |k: usize, n_in: usize, o: usize| {
+            let r = &wts[k].0[o * n_in + n_in - 3..(o + 1) * n_in];
+            Vector3::new(r[0], r[1], r[2])
+        };
+        let (mut h0, mut h1, mut h2, mut h3) =
+            ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
+        let mut acc = [0.0f64; 512];
+        for o in 0..w {
+            h0[o] = silu(self.bias0[o] + p_cols(0, n0, o).dot(p)).0;
+        }
+        mat_vec(&self.hidden_t[0], &h0[..w], &mut acc[..w]);
+        for o in 0..w {
+            h1[o] = silu(wts[1].1[o] + acc[o]).0;
+        }
+        mat_vec(&self.hidden_t[1], &h1[..w], &mut acc[..w]);
+        for o in 0..w {
+            h2[o] = silu(self.bias2[o] + acc[o] + p_cols(2, n2, o).dot(p)).0;
+        }
+        mat_vec(&self.hidden_t[2], &h2[..w], &mut acc[..w]);
+        for o in 0..w {
+            h3[o] = silu(wts[3].1[o] + acc[o]).0;
+        }
+        wts[4].1[0] + dot(&wts[4].0, &h3[..w])
+    }
+
     /// Signed distance and its gradient with respect to the point (normalised frame).
     /// Allocation-free: activations live on the stack (width ≤ 512, checked at load).
     pub fn value_grad(&self, p: &Vector3<f64>) -> (f64, Vector3<f64>) {
@@ -454,32 +495,23 @@ impl LatentSdf {
             ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
         let (mut h2, mut d2, mut h3, mut d3) =
             ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
+        // The forward pass of [`Self::value`], keeping SiLU's slopes.
+        let mut acc = [0.0f64; 512];
         for o in 0..w {
             (h0[o], d0[o]) = silu(self.bias0[o] + p_cols(0, n0, o).dot(p));
         }
-        dense_silu(
-            &wts[1].0,
-            w,
-            &wts[1].1,
-            &h0[..w],
-            &mut h1[..w],
-            &mut d1[..w],
-        );
+        mat_vec(&self.hidden_t[0], &h0[..w], &mut acc[..w]);
         for o in 0..w {
-            (h2[o], d2[o]) = silu(
-                self.bias2[o]
-                    + dot(&wts[2].0[o * n2..o * n2 + w], &h1[..w])
-                    + p_cols(2, n2, o).dot(p),
-            );
+            (h1[o], d1[o]) = silu(wts[1].1[o] + acc[o]);
         }
-        dense_silu(
-            &wts[3].0,
-            w,
-            &wts[3].1,
-            &h2[..w],
-            &mut h3[..w],
-            &mut d3[..w],
-        );
+        mat_vec(&self.hidden_t[1], &h1[..w], &mut acc[..w]);
+        for o in 0..w {
+            (h2[o], d2[o]) = silu(self.bias2[o] + acc[o] + p_cols(2, n2, o).dot(p));
+        }
+        mat_vec(&self.hidden_t[2], &h2[..w], &mut acc[..w]);
+        for o in 0..w {
+            (h3[o], d3[o]) = silu(wts[3].1[o] + acc[o]);
+        }
         let f = wts[4].1[0] + dot(&wts[4].0, &h3[..w]);
         // Reverse pass, reusing the activation buffers for gradients of the pre-activations.
         let g3 = &mut h3[..w];
@@ -501,11 +533,17 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// `h = silu(W x + b)` and `d = silu'(W x + b)`; `W` row-major with rows of `n_in`, of which the
-/// first `x.len()` columns are used.
-fn dense_silu(wt: &[f64], n_in: usize, b: &[f64], x: &[f64], h: &mut [f64], d: &mut [f64]) {
-    for o in 0..h.len() {
-        (h[o], d[o]) = silu(b[o] + dot(&wt[o * n_in..o * n_in + x.len()], x));
+/// `acc = W x` from `W`'s transpose (`wt`, input-major rows of `acc.len()`): accumulated input
+/// by input, so the compiler vectorises across outputs — a row-by-row dot product is one chain
+/// of dependent additions per output (sphere tracing's single points spent half their time
+/// there).
+fn mat_vec(wt: &[f64], x: &[f64], acc: &mut [f64]) {
+    let n = acc.len();
+    acc.fill(0.0);
+    for (i, xi) in x.iter().enumerate() {
+        for (a, wv) in acc.iter_mut().zip(&wt[i * n..(i + 1) * n]) {
+            *a += wv * xi;
+        }
     }
 }
 
@@ -524,7 +562,7 @@ fn back_silu(wt: &[f64], n_in: usize, g_out: &[f64], d_in: &[f64], g_in: &mut [f
 
 impl irmirror_render::sdf::Sdf for LatentSdf {
     fn distance(&self, p: &Vector3<f64>) -> f64 {
-        self.value_grad(p).0
+        self.value(p)
     }
     fn gradient(&self, p: &Vector3<f64>) -> Vector3<f64> {
         self.value_grad(p).1

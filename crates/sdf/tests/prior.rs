@@ -93,6 +93,12 @@ fn network_gradients_match_finite_differences() {
         let (f, gz, gp) = net.eval_full(&z, &p);
         let (f2, gp2) = shape.value_grad(&p);
         assert!((f - f2).abs() < 1e-12, "folded latent changes the value");
+        // The value alone (sphere tracing's steps) is the same forward pass, to the bit.
+        assert_eq!(
+            shape.value(&p).to_bits(),
+            f2.to_bits(),
+            "value alone differs"
+        );
         assert!(
             (gp - gp2).norm() < 1e-12,
             "fast and reference point gradients differ"
@@ -118,7 +124,7 @@ fn network_gradients_match_finite_differences() {
                 gz[k]
             );
         }
-        // The batched (candle, f32) path agrees with the f64 one.
+        // The batched (f32) path agrees with the f64 one.
         let b = net.eval_batch(&z, &[p]).unwrap()[0];
         assert!((b - f).abs() < 1e-4 * (1.0 + f.abs()), "{b} vs {f}");
     }
