@@ -540,8 +540,22 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 fn mat_vec(wt: &[f64], x: &[f64], acc: &mut [f64]) {
     let n = acc.len();
     acc.fill(0.0);
-    for (i, xi) in x.iter().enumerate() {
-        for (a, wv) in acc.iter_mut().zip(&wt[i * n..(i + 1) * n]) {
+    // Four inputs per pass over `acc` (each output still adds them in input order).
+    let mut blocks = x.chunks_exact(4);
+    let mut i = 0;
+    for xb in &mut blocks {
+        let rows = &wt[i * n..(i + 4) * n];
+        let (r0, rest) = rows.split_at(n);
+        let (r1, rest) = rest.split_at(n);
+        let (r2, r3) = rest.split_at(n);
+        for ((((a, w0), w1), w2), w3) in acc.iter_mut().zip(r0).zip(r1).zip(r2).zip(r3) {
+            *a = *a + w0 * xb[0] + w1 * xb[1] + w2 * xb[2] + w3 * xb[3];
+        }
+        i += 4;
+    }
+    for (k, xi) in blocks.remainder().iter().enumerate() {
+        let row = &wt[(i + k) * n..(i + k + 1) * n];
+        for (a, wv) in acc.iter_mut().zip(row) {
             *a += wv * xi;
         }
     }
