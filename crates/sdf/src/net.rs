@@ -448,71 +448,54 @@ impl LatentSdf {
         Ok(baked.with_band(band))
     }
 
-    /// Signed distance alone: [`Self::value_grad`]'s forward pass with the same arithmetic (the
-    /// same value to the bit), without SiLU's slopes and the reverse pass — half the work, which
-    /// is what sphere tracing's steps need.
+    /// Signed distance alone: [`Self::value_grad`]'s forward pass (the same value to the bit)
+    /// without the reverse pass — half the work, which is what sphere tracing's steps need.
     pub fn value(&self, p: &Vector3<f64>) -> f64 {
+        let (mut h, mut d) = ([[0.0f64; 512]; 4], [[0.0f64; 512]; 4]);
+        self.forward(p, &mut h, &mut d)
+    }
+
+    /// The `p` columns of layer `k` (`n_in` inputs), output `o`: only they remain of the input
+    /// layers once the latent is folded into the biases.
+    fn p_cols(&self, k: usize, n_in: usize, o: usize) -> Vector3<f64> {
+        let r = &self.net.weights[k].0[o * n_in + n_in - 3..(o + 1) * n_in];
+        Vector3::new(r[0], r[1], r[2])
+    }
+
+    /// The forward pass: the four hidden layers' activations `h` and SiLU's slopes `d`, and the
+    /// value. Allocation-free: activations live on the stack (width ≤ 512, checked at load).
+    fn forward(&self, p: &Vector3<f64>, h: &mut [[f64; 512]; 4], d: &mut [[f64; 512]; 4]) -> f64 {
         let (l, w) = (self.net.latent_dim, self.net.width);
         let wts = &self.net.weights;
         let (n0, n2) = (l + 3, w + l + 3);
-        let p_cols = |k: usize, n_in: usize, o: usize| {
-            let r = &wts[k].0[o * n_in + n_in - 3..(o + 1) * n_in];
-            Vector3::new(r[0], r[1], r[2])
-        };
-        let (mut h0, mut h1, mut h2, mut h3) =
-            ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
         let mut acc = [0.0f64; 512];
         for o in 0..w {
-            h0[o] = silu(self.bias0[o] + p_cols(0, n0, o).dot(p)).0;
+            (h[0][o], d[0][o]) = silu(self.bias0[o] + self.p_cols(0, n0, o).dot(p));
         }
-        mat_vec(&self.hidden_t[0], &h0[..w], &mut acc[..w]);
+        mat_vec(&self.hidden_t[0], &h[0][..w], &mut acc[..w]);
         for o in 0..w {
-            h1[o] = silu(wts[1].1[o] + acc[o]).0;
+            (h[1][o], d[1][o]) = silu(wts[1].1[o] + acc[o]);
         }
-        mat_vec(&self.hidden_t[1], &h1[..w], &mut acc[..w]);
+        mat_vec(&self.hidden_t[1], &h[1][..w], &mut acc[..w]);
         for o in 0..w {
-            h2[o] = silu(self.bias2[o] + acc[o] + p_cols(2, n2, o).dot(p)).0;
+            (h[2][o], d[2][o]) = silu(self.bias2[o] + acc[o] + self.p_cols(2, n2, o).dot(p));
         }
-        mat_vec(&self.hidden_t[2], &h2[..w], &mut acc[..w]);
+        mat_vec(&self.hidden_t[2], &h[2][..w], &mut acc[..w]);
         for o in 0..w {
-            h3[o] = silu(wts[3].1[o] + acc[o]).0;
+            (h[3][o], d[3][o]) = silu(wts[3].1[o] + acc[o]);
         }
-        wts[4].1[0] + dot(&wts[4].0, &h3[..w])
+        wts[4].1[0] + dot(&wts[4].0, &h[3][..w])
     }
 
     /// Signed distance and its gradient with respect to the point (normalised frame).
-    /// Allocation-free: activations live on the stack (width ≤ 512, checked at load).
     pub fn value_grad(&self, p: &Vector3<f64>) -> (f64, Vector3<f64>) {
         let (l, w) = (self.net.latent_dim, self.net.width);
         let wts = &self.net.weights;
         let (n0, n2) = (l + 3, w + l + 3);
-        // Only the p columns of layers 0 and 2 remain: the latent is folded into the biases.
-        let p_cols = |k: usize, n_in: usize, o: usize| {
-            let r = &wts[k].0[o * n_in + n_in - 3..(o + 1) * n_in];
-            Vector3::new(r[0], r[1], r[2])
-        };
-        let (mut h0, mut d0, mut h1, mut d1) =
-            ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
-        let (mut h2, mut d2, mut h3, mut d3) =
-            ([0.0f64; 512], [0.0f64; 512], [0.0f64; 512], [0.0f64; 512]);
-        // The forward pass of [`Self::value`], keeping SiLU's slopes.
-        let mut acc = [0.0f64; 512];
-        for o in 0..w {
-            (h0[o], d0[o]) = silu(self.bias0[o] + p_cols(0, n0, o).dot(p));
-        }
-        mat_vec(&self.hidden_t[0], &h0[..w], &mut acc[..w]);
-        for o in 0..w {
-            (h1[o], d1[o]) = silu(wts[1].1[o] + acc[o]);
-        }
-        mat_vec(&self.hidden_t[1], &h1[..w], &mut acc[..w]);
-        for o in 0..w {
-            (h2[o], d2[o]) = silu(self.bias2[o] + acc[o] + p_cols(2, n2, o).dot(p));
-        }
-        mat_vec(&self.hidden_t[2], &h2[..w], &mut acc[..w]);
-        for o in 0..w {
-            (h3[o], d3[o]) = silu(wts[3].1[o] + acc[o]);
-        }
-        let f = wts[4].1[0] + dot(&wts[4].0, &h3[..w]);
+        let (mut h, mut d) = ([[0.0f64; 512]; 4], [[0.0f64; 512]; 4]);
+        let f = self.forward(p, &mut h, &mut d);
+        let [h0, h1, h2, h3] = &mut h;
+        let [d0, d1, d2, d3] = &d;
         // Reverse pass, reusing the activation buffers for gradients of the pre-activations.
         let g3 = &mut h3[..w];
         for o in 0..w {
@@ -523,7 +506,7 @@ impl LatentSdf {
         back_silu(&wts[1].0, w, &h1[..w], &d0[..w], &mut h0[..w]);
         let mut gp = Vector3::zeros();
         for o in 0..w {
-            gp += p_cols(2, n2, o) * h2[o] + p_cols(0, n0, o) * h0[o];
+            gp += self.p_cols(2, n2, o) * h2[o] + self.p_cols(0, n0, o) * h0[o];
         }
         (f, gp)
     }
