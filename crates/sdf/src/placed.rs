@@ -313,6 +313,11 @@ pub fn fit_placed(
     ];
     let sizes = [l, 3, 3, 1];
     let mut adams = sizes.map(|n| Adam::new(n, params));
+    let lrs: Vec<Vec<f64>> = sizes
+        .iter()
+        .zip(&rates)
+        .map(|(&n, &r)| vec![r; n])
+        .collect();
     let mut state = HandState {
         r0: init.rotation,
         t0: init.translation,
@@ -358,16 +363,14 @@ pub fn fit_placed(
         curve.push(value);
         let grad = grad.expect("asked for");
         let mut offset = 0;
-        for (g, (adam, (&size, &rate))) in
-            adams.iter_mut().zip(sizes.iter().zip(&rates)).enumerate()
-        {
+        for (g, (adam, (&size, lr))) in adams.iter_mut().zip(sizes.iter().zip(&lrs)).enumerate() {
             let part = &grad[offset..offset + size];
             offset += size;
             if g > 0 && !joint {
                 continue;
             }
             let st = &mut step_buf[..size];
-            adam.step(part, &vec![rate; size], decay, st);
+            adam.step(part, lr, decay, st);
             match g {
                 0 => state.z.iter_mut().zip(st.iter()).for_each(|(z, s)| *z -= s),
                 // δ ← −step, folded into R₀ (δ is zero again at the next step).
