@@ -46,9 +46,8 @@ pub(crate) struct SharedLatentNet<T: Real> {
 }
 
 /// What the reverse pass needs of one chunk's forward pass: SiLU's derivative at each hidden
-/// layer's pre-activation.
+/// layer's pre-activation (`W × n`).
 struct ChunkPass<T: Real> {
-    q: DMatrix<T>,
     slope: [DMatrix<T>; 4],
 }
 
@@ -83,8 +82,8 @@ impl Activation for f64 {
 }
 
 /// `e^x` in f32 within 2 ulp on [−87, 87] (clamped there: SiLU needs no more), branch-free:
-/// `x = n ln 2 + r`, `|r| ≤ ln 2 / 2`, Taylor to degree 7 of `e^r` (truncation < 1e-8 relative), the
-/// power of two built in the exponent bits.
+/// `x = n ln 2 + r`, `|r| ≤ ln 2 / 2`, Taylor to degree 7 of `e^r` (truncation < 1e-8
+/// relative), the power of two built in the exponent bits.
 #[inline(always)]
 fn exp_f32(x: f32) -> f32 {
     const LOG2E: f32 = std::f32::consts::LOG2_E;
@@ -234,7 +233,6 @@ impl<T: Activation> SharedLatentNet<T> {
         let out = h3.tr_mul(&self.w4);
         let values = out.iter().map(|v| (*v + self.b4).to_f64()).collect();
         let pass = keep.then_some(ChunkPass {
-            q,
             slope: [s0, s1, s2, s3],
         });
         (values, pass)
@@ -243,14 +241,16 @@ impl<T: Activation> SharedLatentNet<T> {
     /// Given `∂L/∂f_i` per point (in the order of the forward pass), `∂L/∂q_i` per point and
     /// `∂L/∂z`.
     pub(crate) fn backward(&self, pass: &Pass<T>, grad: &[f64]) -> (Vec<Vector3<f64>>, Vec<f64>) {
+        assert_eq!(
+            grad.len().div_ceil(CHUNK),
+            pass.chunks.len(),
+            "one gradient per point of the forward pass"
+        );
         let parts: Vec<(Vec<Vector3<f64>>, DVector<f64>)> = pass
             .chunks
             .par_iter()
-            .enumerate()
-            .map(|(k, chunk)| {
-                let n = chunk.q.ncols();
-                self.backward_chunk(chunk, &grad[k * CHUNK..k * CHUNK + n])
-            })
+            .zip(grad.par_chunks(CHUNK))
+            .map(|(chunk, g)| self.backward_chunk(chunk, g))
             .collect();
         let mut gz = DVector::zeros(self.latent_dim);
         let mut gq = Vec::with_capacity(grad.len());
