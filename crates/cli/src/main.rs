@@ -223,6 +223,13 @@ enum Command {
         /// 0.35,35. Adds about two thirds of a fit's time per capture.
         #[arg(long, value_name = "METRES,DEGREES", num_args = 0..=1, default_missing_value = "0.35,35", value_parser = parse_basin)]
         basin: Option<irmirror_eval::bench::BasinProbe>,
+        /// The basin probe's start poses (with --basin), start k the k-th modulo their number:
+        /// pose-generator templates (stand, walk, sit, reach, …) or `truth-latent` (the pose
+        /// prior's encoding of the true pose without its residual). `--basin 0,0
+        /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
+        /// does the refinement find the pose?
+        #[arg(long, value_name = "POSE,...", value_delimiter = ',', requires = "basin", value_parser = parse_basin_pose)]
+        basin_poses: Vec<String>,
     },
     /// Train an object shape prior (DeepSDF auto-decoder) for one category.
     ///
@@ -333,7 +340,26 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
     if !(0.0..=180.0).contains(&turn_deg) {
         return Err(format!("turn {turn_deg}°: must lie in [0, 180]"));
     }
-    Ok(irmirror_eval::bench::BasinProbe { offset_m, turn_deg })
+    Ok(irmirror_eval::bench::BasinProbe {
+        offset_m,
+        turn_deg,
+        ..Default::default()
+    })
+}
+
+/// `--basin-poses`: a pose-generator template or `truth-latent`.
+fn parse_basin_pose(s: &str) -> Result<String, String> {
+    use irmirror_body::prior::generator::TEMPLATES;
+    let s = s.trim();
+    if s == irmirror_eval::bench::TRUTH_LATENT || TEMPLATES.contains(&s) {
+        Ok(s.to_string())
+    } else {
+        Err(format!(
+            "{s:?}: one of {}, {}",
+            TEMPLATES.join(", "),
+            irmirror_eval::bench::TRUTH_LATENT
+        ))
+    }
 }
 
 fn main() -> std::process::ExitCode {
@@ -399,8 +425,14 @@ fn main() -> std::process::ExitCode {
             variants,
             config,
             keep_captures,
-            basin,
+            mut basin,
+            basin_poses,
         } => reconstruct_cmd::load_config(config.as_deref(), &[]).and_then(|config| {
+            if let Some(b) = basin.as_mut()
+                && !basin_poses.is_empty()
+            {
+                b.poses = basin_poses;
+            }
             eval_cmd::run(
                 preset,
                 &out,

@@ -585,7 +585,7 @@ fn eval_probes_the_refinement_basin() {
     );
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
     assert!(
-        table.contains("| tabletop-wide | 1 | 4 (±0.20 m, ±20°) |"),
+        table.contains("| tabletop-wide | 1 | stand | 4 (±0.20 m, ±20°) |"),
         "{table}"
     );
     for (arg, needle) in [
@@ -604,6 +604,64 @@ fn eval_probes_the_refinement_basin() {
     }
 }
 
+/// `eval --variants full,true-objects --basin 0,0 --basin-poses …`: the oracle run sees the
+/// simulator's objects (its own table, paired with the fit), and the basin probe starts from
+/// the true root and facing with the poses asked, in turn; an unknown pose is a clear error.
+#[test]
+fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
+    let (o, out) = cheap_eval(
+        "eval-oracle",
+        &[
+            "--cell",
+            "tabletop-bowl",
+            "--variants",
+            "full,true-objects",
+            "--basin",
+            "0,0",
+            "--basin-poses",
+            "walk,truth-latent",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let c = &results["captures"][0];
+    for v in ["full", "true-objects"] {
+        assert!(c["variants"][v]["eval"]["root_error_m"].is_f64(), "{c}");
+    }
+    let poses: Vec<&str> = c["diagnosis"]["basin"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["pose"].as_str().unwrap())
+        .collect();
+    assert_eq!(poses, ["walk", "truth-latent", "walk", "truth-latent"]);
+    let table = std::fs::read_to_string(out.join("table.md")).unwrap();
+    for row in [
+        "within 15 cm and 30°, true objects / fitted objects",
+        "| tabletop-bowl | 1 | walk | 2 (±0.00 m, ±0°) |",
+        "| tabletop-bowl | 1 | truth-latent | 2 (±0.00 m, ±0°) |",
+    ] {
+        assert!(table.contains(row), "{row}: {table}");
+    }
+    let bad = out.parent().unwrap().join("bad");
+    let o = irmirror(&[
+        "eval",
+        "--basin",
+        "0,0",
+        "--basin-poses",
+        "moonwalk",
+        "--out",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("truth-latent"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!bad.exists());
+}
+
 /// `eval --shapes family`: the captures' objects come from the learned priors' families, the
 /// run record says so, and the diagnosis traces the true (procedural) objects too: the truth's
 /// data term through them and stage 1's mirror on the mask are measured, not left out.
@@ -611,7 +669,14 @@ fn eval_probes_the_refinement_basin() {
 fn eval_simulates_family_shapes_and_diagnoses_their_mirror() {
     let (o, out) = cheap_eval(
         "eval-family",
-        &["--cell", "tabletop-mug", "--shapes", "family"],
+        &[
+            "--cell",
+            "tabletop-mug",
+            "--shapes",
+            "family",
+            "--variants",
+            "full,true-objects",
+        ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let record = std::fs::read_to_string(out.join("run.toml")).unwrap();
@@ -624,6 +689,12 @@ fn eval_simulates_family_shapes_and_diagnoses_their_mirror() {
     assert!(
         through_truth.is_finite() && (0.0..180.0).contains(&angle),
         "{d}"
+    );
+    // The oracle has no fitted counterpart of a family shape: a recorded error, not a run.
+    let oracle = &results["captures"][0]["variants"]["true-objects"];
+    assert!(
+        oracle["eval"].is_null() && oracle["error"].as_str().unwrap().contains("two-parameter"),
+        "{oracle}"
     );
 }
 

@@ -123,13 +123,21 @@ pub struct Diagnosis {
 }
 
 /// How far from the truth the basin probe starts the refinement (`eval --basin`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BasinProbe {
     /// The root moved this far along the horizontal objects→person line (both ways), m.
     pub offset_m: f64,
     /// The body turned this far about the up axis (both ways), degrees.
     pub turn_deg: f64,
+    /// The starts' poses, start k the k-th modulo their number (`eval --basin-poses`): a
+    /// template of the pose generator (the search's candidates start from "stand", "walk",
+    /// "sit") or [`TRUTH_LATENT`].
+    pub poses: Vec<String>,
 }
+
+/// A basin-probe start pose: the pose prior's encoding of the true pose without the residual
+/// (what the latent alone states of the truth; the residual is left to the refinement).
+pub const TRUTH_LATENT: &str = "truth-latent";
 
 impl Default for BasinProbe {
     /// ±35 cm and ±35°: about the spacing of the search's grid (eight yaw bins are 45° apart),
@@ -138,13 +146,17 @@ impl Default for BasinProbe {
         Self {
             offset_m: 0.35,
             turn_deg: 35.0,
+            poses: vec!["stand".into()],
         }
     }
 }
 
 /// One start of the basin probe and where the refinement ended (`None`: it diverged).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BasinStart {
+    /// The start's pose ([`BasinProbe::poses`]).
+    #[serde(default = "stand")]
+    pub pose: String,
     /// The start's root offset along the objects→person line, m (+: away from the objects).
     pub offset_m: f64,
     /// The start's turn about the up axis, degrees.
@@ -155,6 +167,11 @@ pub struct BasinStart {
     pub facing_error_deg: Option<f64>,
     /// The data term at the end (all rays, final σ).
     pub data_loss: Option<f64>,
+}
+
+/// The basin probe's pose before it could be chosen.
+fn stand() -> String {
+    "stand".into()
 }
 
 impl BasinStart {
@@ -193,7 +210,7 @@ pub(super) fn diagnose(
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
     (seed, cfg): (u64, &ReconConfig),
-    basin: Option<BasinProbe>,
+    basin: Option<&BasinProbe>,
 ) -> Result<Diagnosis, EvalError> {
     let BodyPriors { model, prior } = priors;
     let hcfg = cfg.human_settings();
@@ -427,7 +444,7 @@ fn with_problem<R>(
 /// medians over a cell.
 fn probe_basin(
     truth: &HumanState,
-    b: BasinProbe,
+    b: &BasinProbe,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
     (seed, cfg): (u64, &ReconConfig),
@@ -443,31 +460,49 @@ fn probe_basin(
             .try_normalize(1e-9)
             .unwrap_or_else(|| up.cross(&Vector3::x()).normalize());
         let generator = irmirror_body::prior::generator::PoseGenerator::new(priors.model);
+        // Each pose drawn once (the templates are drawn from ranges), as the search does.
         let mut rng = irmirror_geom::rng::seeded(seed, 21);
-        let stand = generator.template("stand", &mut rng).ok_or_else(|| {
-            irmirror_recon::ReconError::Config(
-                "the pose generator has no \"stand\" template".into(),
-            )
-        })?;
-        let latent = priors.prior.encode(&stand)?;
+        let latents: Vec<Vec<f64>> = b
+            .poses
+            .iter()
+            .map(|name| {
+                if name == TRUTH_LATENT {
+                    return Ok(truth.latent.clone());
+                }
+                let rotvecs = generator.template(name, &mut rng).ok_or_else(|| {
+                    irmirror_recon::ReconError::Config(format!(
+                        "the pose generator has no {name:?} template"
+                    ))
+                })?;
+                Ok(priors.prior.encode(&rotvecs)?)
+            })
+            .collect::<Result<_, EvalError>>()?;
+        if latents.is_empty() {
+            return Err(
+                irmirror_recon::ReconError::Config("--basin-poses: no pose given".into()).into(),
+            );
+        }
         let (d, a) = (b.offset_m, b.turn_deg);
         let starts = [(d, a), (-d, -a), (d, -a), (-d, a)];
         starts
             .par_iter()
             .enumerate()
             .map(|(k, &(offset_m, turn_deg))| {
+                let latent = latents[k % latents.len()].clone();
+                let pose = b.poses[k % b.poses.len()].clone();
                 let start = HumanState {
                     translation: truth.translation + line * offset_m,
                     rotation: irmirror_geom::rotation::axis_angle_to_matrix(
                         &(up * turn_deg.to_radians()),
                     ) * truth.rotation,
                     height: hcfg.height_prior[0],
-                    latent: latent.clone(),
+                    latent,
                     residual: Vec::new(),
                 };
                 let end = refine_as_fit(problem, &start, &hcfg, edge, seed.wrapping_add(k as u64))?;
                 let Some(end) = end else {
                     return Ok(BasinStart {
+                        pose,
                         offset_m,
                         turn_deg,
                         root_error_m: None,
@@ -476,6 +511,7 @@ fn probe_basin(
                     });
                 };
                 Ok(BasinStart {
+                    pose,
                     offset_m,
                     turn_deg,
                     root_error_m: Some((end.translation - truth.translation).norm()),

@@ -13,6 +13,7 @@ mod table;
 
 pub use diagnosis::{
     BasinProbe, BasinStart, Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M,
+    TRUTH_LATENT,
 };
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
@@ -95,17 +96,27 @@ pub enum Variant {
     NoRadiometric,
     /// The full model.
     Full,
+    /// The full model's stage 2 through the simulator's own objects instead of stage 1's fit
+    /// (an oracle, not a method: it separates what stage 1's mirror costs the person from what
+    /// stage 2 loses; runs only when `--variants` names it; simple shapes only).
+    TrueObjects,
 }
 
 impl Variant {
     /// Every variant, in the table's column order.
-    pub const ALL: [Variant; 5] = [
+    pub const ALL: [Variant; 6] = [
         Variant::NoEdgeSampling,
         Variant::NoSphereTracing,
         Variant::NoSmoothing,
         Variant::NoRadiometric,
         Variant::Full,
+        Variant::TrueObjects,
     ];
+
+    /// Whether it runs only when asked for by name (`--variants`).
+    pub fn on_request_only(self) -> bool {
+        self == Variant::TrueObjects
+    }
 
     /// Whether it runs on every capture (else on the first few of each cell).
     pub fn on_every_capture(self) -> bool {
@@ -120,6 +131,7 @@ impl Variant {
             Variant::NoSmoothing => "w/o surface smoothing",
             Variant::NoRadiometric => "w/o radiometric fit (mask, as the paper)",
             Variant::Full => "full model",
+            Variant::TrueObjects => "full model through the true objects (oracle)",
         }
     }
 
@@ -130,7 +142,7 @@ impl Variant {
             Variant::NoSphereTracing => Some(Ablation::SphereTracing),
             Variant::NoSmoothing => Some(Ablation::Smoothing),
             Variant::NoRadiometric => Some(Ablation::Radiometric),
-            Variant::Full => None,
+            Variant::Full | Variant::TrueObjects => None,
         }
     }
 }
@@ -305,6 +317,7 @@ mod tests {
             // One start closed, one diverged.
             basin: vec![
                 BasinStart {
+                    pose: "stand".into(),
                     offset_m: 0.35,
                     turn_deg: 35.0,
                     root_error_m: Some(0.1),
@@ -312,6 +325,7 @@ mod tests {
                     data_loss: Some(0.2),
                 },
                 BasinStart {
+                    pose: "stand".into(),
                     offset_m: -0.35,
                     turn_deg: -35.0,
                     root_error_m: None,
@@ -377,7 +391,7 @@ mod tests {
             "{t}"
         );
         assert!(
-            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | – |"),
+            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | 0 of 2 | – |"),
             "{t}"
         );
         assert!(
@@ -395,11 +409,20 @@ mod tests {
         );
         // The basin: two probed captures, two starts each, one closed and one diverged.
         assert!(
-            t.contains("| tabletop-mug | 2 | 4 (±0.35 m, ±35°) | 2 of 4 | 2 | 0.100 | 2 of 4 | 0.200 | 0.300 |"),
+            t.contains("| tabletop-mug | 2 | stand | 4 (±0.35 m, ±35°) | 2 of 4 | 2 | 0.100 | 2 of 4 | 0.200 | 0.300 | 0.200 |"),
             "{t}"
         );
-        // Radiometric against the mask: the two captures where both ran.
+        // Radiometric against the mask: the two captures where both ran; the true objects
+        // against the fitted ones: the two where the oracle ran and the full model did not fail.
         assert!(t.contains("| tabletop-mug | 2 | "), "{t}");
+        let oracle = t
+            .split("true objects − fitted objects")
+            .nth(1)
+            .unwrap_or("");
+        assert!(
+            oracle.contains("| tabletop-mug | 2 | 2 of 2 | 2 of 2 | 1 / 1 |"),
+            "{t}"
+        );
         // Hypotheses: both diagnosed fits face 170° off, so no right-facing hypothesis.
         assert!(t.contains("| 0 of 2 | – (n = 0) |"), "{t}");
         assert!(!t.contains("| car |"), "rows without captures are left out");

@@ -21,6 +21,7 @@ use irmirror_recon::objects::{Objects, reconstruct_objects};
 use irmirror_recon::pipeline::{BodyPriors, ReconConfig, reconstruct_human};
 use irmirror_recon::{Preprocessed, ReconError, preprocess};
 use irmirror_sim::presets::{Cell, Shapes, benchmark_scene};
+use irmirror_sim::scene::ObjectShape;
 use irmirror_sim::{SceneFile, Simulation};
 use nalgebra::Vector3;
 use rand_distr::{Distribution, StandardNormal};
@@ -73,8 +74,12 @@ pub fn run(
             .iter()
             .copied()
             .filter(|v| {
+                let asked = selection.variants.contains(v);
+                if v.on_request_only() {
+                    return asked;
+                }
                 (*v == Variant::Full || (!selection.full_only && v.on_every_capture()) || ablate)
-                    && (selection.variants.is_empty() || selection.variants.contains(v))
+                    && (selection.variants.is_empty() || asked)
             })
             .collect()
     };
@@ -102,7 +107,11 @@ pub fn run(
             &p,
             plan,
             priors,
-            (&variants_of(plan), &selection.config, selection.basin),
+            (
+                &variants_of(plan),
+                &selection.config,
+                selection.basin.as_ref(),
+            ),
             &thumbs,
             progress,
         )?);
@@ -123,7 +132,7 @@ pub fn run(
     write_text(&stage.path("report.html"), &html(&report, &table))?;
     let mut record = serde_json::json!({ "command": "eval", "set": set, "limit": selection.limit.map(|l| l as i64).unwrap_or(-1), "cell": selection.cell.map_or("all", Cell::name), "shapes": selection.shapes, "ablated_per_cell": set.ablated_per_cell(), "full_only": selection.full_only, "variants": selection.variants, "keep_captures": selection.keep_captures, "version": env!("CARGO_PKG_VERSION"), "config": selection.config, "random_draws": RANDOM_DRAWS });
     // TOML has no null: the basin probe's settings only when it ran.
-    if let Some(b) = selection.basin {
+    if let Some(b) = &selection.basin {
         record["basin"] = serde_json::json!(b);
     }
     write_text(
@@ -183,7 +192,7 @@ fn run_capture(
     p: &Prepared,
     plan: &Planned,
     priors: BodyPriors<'_>,
-    (variants, base, basin): (&[Variant], &ReconConfig, Option<BasinProbe>),
+    (variants, base, basin): (&[Variant], &ReconConfig, Option<&BasinProbe>),
     thumbs: &Path,
     progress: &dyn BenchProgress,
 ) -> Result<CaptureResult, EvalError> {
@@ -230,21 +239,22 @@ fn run_capture(
         let mut cfg = base.clone();
         cfg.ablate.extend(variant.ablation());
         let t0 = Instant::now();
-        let rec = match reconstruct_human(
-            &p.capture,
-            p.pre.clone(),
-            objects.clone(),
-            priors,
-            &cfg,
-            seed,
-            &Silent,
-        ) {
+        // The oracle sees the simulator's objects; every other variant stage 1's.
+        let seen = match variant {
+            Variant::TrueObjects => true_objects_as_fitted(p, &objects),
+            _ => Ok(objects.clone()),
+        };
+        let rec = seen.and_then(|seen| {
+            reconstruct_human(&p.capture, p.pre.clone(), seen, priors, &cfg, seed, &Silent)
+                .map_err(|e| e.to_string())
+        });
+        let rec = match rec {
             Ok(r) => r,
-            Err(e) => {
-                tracing::warn!("{id}: stage 2 ({}) failed: {e}", variant.heading());
+            Err(reason) => {
+                tracing::warn!("{id}: stage 2 ({}) failed: {reason}", variant.heading());
                 let failed = VariantResult {
                     eval: None,
-                    error: Some(e.to_string()),
+                    error: Some(reason),
                     time_s: t0.elapsed().as_secs_f64(),
                 };
                 result.variants.insert(variant, failed);
@@ -283,6 +293,34 @@ fn run_capture(
     }
     result.random = random_baseline(p, priors, &objects, (seed, base))?;
     Ok(result)
+}
+
+/// Stage 1's result with each object's shape and pose replaced by the simulator's (the
+/// support plane and masks kept): what stage 2 would do with a perfect mirror. Only the
+/// two-parameter shapes have a fitted counterpart; other shape sets are refused.
+fn true_objects_as_fitted(p: &Prepared, fitted: &Objects) -> Result<Objects, String> {
+    let mut objects = fitted.clone();
+    if objects.objects.len() != p.scene.objects.len() {
+        return Err(format!(
+            "true objects: stage 1 found {} objects, the scene has {}",
+            objects.objects.len(),
+            p.scene.objects.len()
+        ));
+    }
+    for ((o, truth), pose) in objects
+        .objects
+        .iter_mut()
+        .zip(&p.scene.objects)
+        .zip(&p.sim.object_poses)
+    {
+        let ObjectShape::Simple(shape) = &truth.shape else {
+            return Err("true objects: only the two-parameter shapes (`--shapes simple`)".into());
+        };
+        o.shape = *shape;
+        o.depth_from_object = *pose;
+        o.learned = None;
+    }
+    Ok(objects)
 }
 
 /// The Random baseline: [`RANDOM_DRAWS`] pose-prior samples at the true root position and

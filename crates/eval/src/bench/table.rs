@@ -109,6 +109,7 @@ pub fn markdown_table(r: &Report) -> String {
     s.push_str(&diagnosis_table(r));
     s.push_str(&hypotheses_table(r));
     s.push_str(&radiometric_table(r));
+    s.push_str(&true_objects_table(r));
     s.push_str(&basin_table(r));
     s.push_str(&objects_table(r));
     s
@@ -126,7 +127,7 @@ pub fn basin_table(r: &Report) -> String {
         return String::new();
     }
     let mut s = String::from(
-        "\n| cell | captures probed | starts (offset, turn) | ended within 15 cm and 30° | diverged | root error at the end, median (m) | facing within 30° at the end | data term at the end, median | the fit's data term, median |\n|---|---|---|---|---|---|---|---|---|\n",
+        "\n| cell | captures probed | start pose | starts (offset, turn) | ended within 15 cm and 30° | diverged | root error at the end, median (m) | facing within 30° at the end | data term at the end, median | the fit's data term, median | the truth's data term, median |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in Cell::ALL {
         let ds: Vec<&Diagnosis> = of_cell(r, c)
@@ -134,35 +135,50 @@ pub fn basin_table(r: &Report) -> String {
             .filter_map(|x| x.diagnosis.as_ref())
             .filter(|d| !d.basin.is_empty())
             .collect();
-        let Some(first) = ds.first().and_then(|d| d.basin.first()) else {
-            continue;
-        };
-        let starts: Vec<&super::BasinStart> = ds.iter().flat_map(|d| &d.basin).collect();
-        let n = starts.len();
-        let closed = starts.iter().filter(|b| b.closed()).count();
-        let diverged = starts.iter().filter(|b| b.root_error_m.is_none()).count();
-        let root: Vec<f64> = starts.iter().filter_map(|b| b.root_error_m).collect();
-        let facing = starts
-            .iter()
-            .filter(|b| {
-                b.facing_error_deg
-                    .is_some_and(|f| f <= super::SUCCESS_FACING_DEG)
-            })
-            .count();
-        let data: Vec<f64> = starts.iter().filter_map(|b| b.data_loss).collect();
+        // One row per start pose, in the order the probe used them.
+        let mut poses: Vec<&str> = Vec::new();
+        for b in ds.iter().flat_map(|d| &d.basin) {
+            if !poses.contains(&b.pose.as_str()) {
+                poses.push(&b.pose);
+            }
+        }
         let fit: Vec<f64> = ds
             .iter()
             .filter_map(|d| d.hypothesis_losses.first().copied())
             .collect();
-        s.push_str(&format!(
-            "| {c} | {} | {n} (±{:.2} m, ±{:.0}°) | {closed} of {n} | {diverged} | {} | {facing} of {n} | {} | {} |\n",
-            ds.len(),
-            first.offset_m.abs(),
-            first.turn_deg.abs(),
-            median(&root),
-            median(&data),
-            median(&fit),
-        ));
+        let truth: Vec<f64> = ds.iter().map(|d| d.truth_loss).collect();
+        for pose in poses {
+            let starts: Vec<&super::BasinStart> = ds
+                .iter()
+                .flat_map(|d| &d.basin)
+                .filter(|b| b.pose == pose)
+                .collect();
+            let Some(first) = starts.first() else {
+                continue;
+            };
+            let n = starts.len();
+            let closed = starts.iter().filter(|b| b.closed()).count();
+            let diverged = starts.iter().filter(|b| b.root_error_m.is_none()).count();
+            let root: Vec<f64> = starts.iter().filter_map(|b| b.root_error_m).collect();
+            let facing = starts
+                .iter()
+                .filter(|b| {
+                    b.facing_error_deg
+                        .is_some_and(|f| f <= super::SUCCESS_FACING_DEG)
+                })
+                .count();
+            let data: Vec<f64> = starts.iter().filter_map(|b| b.data_loss).collect();
+            s.push_str(&format!(
+                "| {c} | {} | {pose} | {n} (±{:.2} m, ±{:.0}°) | {closed} of {n} | {diverged} | {} | {facing} of {n} | {} | {} | {} |\n",
+                ds.len(),
+                first.offset_m.abs(),
+                first.turn_deg.abs(),
+                median(&root),
+                median(&data),
+                median(&fit),
+                median(&truth),
+            ));
+        }
     }
     s
 }
@@ -296,30 +312,54 @@ pub fn hypotheses_table(r: &Report) -> String {
 }
 
 /// The thermal rise against the paper's binary mask on the same captures (the captures where
-/// both ran): the best-by-loss hypothesis' facing within 30°, root and per-vertex medians, and
-/// the paired per-vertex difference (radiometric − mask) with its 95 % interval.
+/// both ran).
 pub fn radiometric_table(r: &Report) -> String {
-    let mut s = String::from(
-        "\n| cell | n (both ran) | facing within 30°, radiometric | facing within 30°, mask | root error median (m), radiometric / mask | per-vertex error median (m), radiometric / mask | per-vertex error, radiometric − mask, mean (m) |\n|---|---|---|---|---|---|---|\n",
+    paired_table(
+        r,
+        (Variant::Full, "radiometric"),
+        (Variant::NoRadiometric, "mask"),
+    )
+}
+
+/// Stage 2 through the simulator's objects against stage 1's (`--variants full,true-objects`):
+/// what a perfect mirror would give the person, on the same captures.
+pub fn true_objects_table(r: &Report) -> String {
+    paired_table(
+        r,
+        (Variant::TrueObjects, "true objects"),
+        (Variant::Full, "fitted objects"),
+    )
+}
+
+/// Two variants on the same captures (those where both ran; empty when none): the
+/// best-by-loss hypothesis' facing within 30°, successes (within 15 cm and 30°), root and
+/// per-vertex medians, and the paired per-vertex difference (a − b) with its 95 % interval.
+fn paired_table(r: &Report, (a, a_name): (Variant, &str), (b, b_name): (Variant, &str)) -> String {
+    let mut s = format!(
+        "\n| cell | n (both ran) | facing within 30°, {a_name} | facing within 30°, {b_name} | within 15 cm and 30°, {a_name} / {b_name} | root error median (m), {a_name} / {b_name} | per-vertex error median (m), {a_name} / {b_name} | per-vertex error, {a_name} − {b_name}, mean (m) |\n|---|---|---|---|---|---|---|---|\n",
     );
+    let mut any = false;
     for c in Cell::ALL {
         let pairs: Vec<(&Evaluation, &Evaluation)> = of_cell(r, c)
             .iter()
             .filter_map(|x| {
                 let get = |v| x.variants.get(&v).and_then(|y| y.eval.as_ref());
-                Some((get(Variant::Full)?, get(Variant::NoRadiometric)?))
+                Some((get(a)?, get(b)?))
             })
             .collect();
         if pairs.is_empty() {
             continue;
         }
-        let (rad, mask): (Vec<&Evaluation>, Vec<&Evaluation>) = pairs.iter().copied().unzip();
-        let facing = |v: &[&Evaluation]| {
+        any = true;
+        let (va, vb): (Vec<&Evaluation>, Vec<&Evaluation>) = pairs.iter().copied().unzip();
+        let facing_ok = |e: &Evaluation| {
+            e.facing_error_deg
+                .is_some_and(|f| f <= super::SUCCESS_FACING_DEG)
+        };
+        let facing = |v: &[&Evaluation]| v.iter().filter(|e| facing_ok(e)).count();
+        let success = |v: &[&Evaluation]| {
             v.iter()
-                .filter(|e| {
-                    e.facing_error_deg
-                        .is_some_and(|f| f <= super::SUCCESS_FACING_DEG)
-                })
+                .filter(|e| facing_ok(e) && e.root_error_m <= super::SUCCESS_ROOT_M)
                 .count()
         };
         let col = |v: &[&Evaluation], f: fn(&Evaluation) -> Option<f64>| {
@@ -327,21 +367,23 @@ pub fn radiometric_table(r: &Report) -> String {
         };
         let diff: Vec<f64> = pairs
             .iter()
-            .filter_map(|(a, b)| Some(a.vertex_error_m? - b.vertex_error_m?))
+            .filter_map(|(x, y)| Some(x.vertex_error_m? - y.vertex_error_m?))
             .collect();
         let n = pairs.len();
         s.push_str(&format!(
-            "| {c} | {n} | {} of {n} | {} of {n} | {} / {} | {} / {} | {} |\n",
-            facing(&rad),
-            facing(&mask),
-            col(&rad, |e| Some(e.root_error_m)),
-            col(&mask, |e| Some(e.root_error_m)),
-            col(&rad, |e| e.vertex_error_m),
-            col(&mask, |e| e.vertex_error_m),
+            "| {c} | {n} | {} of {n} | {} of {n} | {} / {} | {} / {} | {} / {} | {} |\n",
+            facing(&va),
+            facing(&vb),
+            success(&va),
+            success(&vb),
+            col(&va, |e| Some(e.root_error_m)),
+            col(&vb, |e| Some(e.root_error_m)),
+            col(&va, |e| e.vertex_error_m),
+            col(&vb, |e| e.vertex_error_m),
             cell(&diff, diff.len()),
         ));
     }
-    s
+    if any { s } else { String::new() }
 }
 
 /// The median to 3 decimals, or "–".
