@@ -527,10 +527,19 @@ pub struct MocapSet {
 /// The shipped set (see `assets/poses/README.md`).
 const BUILTIN: &[u8] = include_bytes!("../../../assets/poses/mocap_bvhtools.safetensors");
 
+/// The pose prior's real training poses (DeepMimic clips; `assets/poses/README.md`).
+const PRIOR_TRAINING: &[u8] = include_bytes!("../../../assets/poses/mocap_deepmimic.safetensors");
+
 impl MocapSet {
-    /// The shipped set.
+    /// The shipped set: the benchmark's persons.
     pub fn builtin() -> Result<Self, BodyError> {
         Self::from_bytes(BUILTIN, "built-in motion-capture poses")
+    }
+
+    /// The pose prior's real training poses (another source than [`Self::builtin`]: never
+    /// the benchmark's persons).
+    pub fn prior_training() -> Result<Self, BodyError> {
+        Self::from_bytes(PRIOR_TRAINING, "built-in pose-prior training poses")
     }
 
     /// Serialises to safetensors: `rotvecs` (N × J × 3, f32), metadata `sources` (JSON list) and

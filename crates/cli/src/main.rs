@@ -225,7 +225,8 @@ enum Command {
         basin: Option<irmirror_eval::bench::BasinProbe>,
         /// The basin probe's start poses (with --basin), start k the k-th modulo their number:
         /// pose-generator templates (stand, walk, sit, reach, …) or `truth-latent` (the pose
-        /// prior's encoding of the true pose without its residual). `--basin 0,0
+        /// prior's encoding of the true pose without its residual) or `bank` ("stand" tried
+        /// in the pose bank's poses first, as the search's survivors are). `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
         /// does the refinement find the pose?
         #[arg(long, value_name = "POSE,...", value_delimiter = ',', requires = "basin", value_parser = parse_basin_pose)]
@@ -347,17 +348,17 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
     })
 }
 
-/// `--basin-poses`: a pose-generator template or `truth-latent`.
+/// `--basin-poses`: a pose-generator template, `truth-latent` or `bank`.
 fn parse_basin_pose(s: &str) -> Result<String, String> {
     use irmirror_body::prior::generator::TEMPLATES;
     let s = s.trim();
-    if s == irmirror_eval::bench::TRUTH_LATENT || TEMPLATES.contains(&s) {
+    use irmirror_eval::bench::{BANK, TRUTH_LATENT};
+    if s == TRUTH_LATENT || s == BANK || TEMPLATES.contains(&s) {
         Ok(s.to_string())
     } else {
         Err(format!(
-            "{s:?}: one of {}, {}",
+            "{s:?}: one of {}, {TRUTH_LATENT}, {BANK}",
             TEMPLATES.join(", "),
-            irmirror_eval::bench::TRUTH_LATENT
         ))
     }
 }

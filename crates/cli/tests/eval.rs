@@ -97,7 +97,8 @@ fn eval_probes_the_refinement_basin() {
 
 /// `eval --variants full,true-objects --basin 0,0 --basin-poses …`: the oracle run sees the
 /// simulator's objects (its own table, paired with the fit), and the basin probe starts from
-/// the true root and facing with the poses asked, in turn; an unknown pose is a clear error.
+/// the true root and facing with the poses asked, in turn (`bank`: through the pose bank); an
+/// unknown pose is a clear error.
 #[test]
 fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     let (o, out) = cheap_eval(
@@ -110,7 +111,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
             "--basin",
             "0,0",
             "--basin-poses",
-            "walk,truth-latent",
+            "walk,truth-latent,bank",
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
@@ -126,12 +127,13 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
         .iter()
         .map(|b| b["pose"].as_str().unwrap())
         .collect();
-    assert_eq!(poses, ["walk", "truth-latent", "walk", "truth-latent"]);
+    assert_eq!(poses, ["walk", "truth-latent", "bank", "walk"]);
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
     for row in [
         "within 15 cm and 30°, true objects / fitted objects",
         "| tabletop-bowl | 1 | walk | 2 (±0.00 m, ±0°) |",
-        "| tabletop-bowl | 1 | truth-latent | 2 (±0.00 m, ±0°) |",
+        "| tabletop-bowl | 1 | truth-latent | 1 (±0.00 m, ±0°) |",
+        "| tabletop-bowl | 1 | bank | 1 (±0.00 m, ±0°) |",
     ] {
         assert!(table.contains(row), "{row}: {table}");
     }
@@ -146,7 +148,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
         bad.to_str().unwrap(),
     ]);
     assert!(
-        !o.status.success() && stderr(&o).contains("truth-latent"),
+        !o.status.success() && stderr(&o).contains("truth-latent") && stderr(&o).contains("bank"),
         "{}",
         stderr(&o)
     );

@@ -241,6 +241,17 @@ impl PoseGenerator {
         (name, self.perturb(r, rng, noise_deg))
     }
 
+    /// A pose (rotation vectors, root identity) mirrored left/right: each joint takes its
+    /// mirror joint's rotation reflected in the body's sagittal (Y–Z) plane.
+    pub fn mirrored(&self, r: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        (0..self.n)
+            .map(|i| {
+                let w = r[self.mirror[i]];
+                [w[0], -w[1], -w[2]]
+            })
+            .collect()
+    }
+
     /// A pose (rotation vectors, any source: a template, motion capture) mirrored left/right
     /// with probability ½, plus Gaussian joint noise of σ `noise_deg` per rotation-vector
     /// component, root identity, clamped to the limits: what the training set holds.
@@ -251,13 +262,7 @@ impl PoseGenerator {
         noise_deg: f64,
     ) -> Vec<[f64; 3]> {
         if rng.random_bool(0.5) {
-            let m: Vec<[f64; 3]> = (0..self.n)
-                .map(|i| {
-                    let w = r[self.mirror[i]];
-                    [w[0], -w[1], -w[2]]
-                })
-                .collect();
-            r = m;
+            r = self.mirrored(&r);
         }
         let noise = Normal::new(0.0, noise_deg.max(0.0).to_radians()).expect("σ ≥ 0");
         for w in r.iter_mut().skip(1) {

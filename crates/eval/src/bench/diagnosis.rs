@@ -139,6 +139,11 @@ pub struct BasinProbe {
 /// (what the latent alone states of the truth; the residual is left to the refinement).
 pub const TRUTH_LATENT: &str = "truth-latent";
 
+/// A basin start in the search's "stand" pose swapped through the pose bank at the start's
+/// root and facing, as the search does at its survivors (`[human.search] pose_bank`, 64 when
+/// that is 0).
+pub const BANK: &str = "bank";
+
 impl Default for BasinProbe {
     /// ±35 cm and ±35°: about the spacing of the search's grid (eight yaw bins are 45° apart),
     /// so the starts sit where the search's nearest candidate to the truth can be.
@@ -469,6 +474,7 @@ fn probe_basin(
                 if name == TRUTH_LATENT {
                     return Ok(truth.latent.clone());
                 }
+                let name = if name == BANK { "stand" } else { name };
                 let rotvecs = generator.template(name, &mut rng).ok_or_else(|| {
                     irmirror_recon::ReconError::Config(format!(
                         "the pose generator has no {name:?} template"
@@ -490,7 +496,7 @@ fn probe_basin(
             .map(|(k, &(offset_m, turn_deg))| {
                 let latent = latents[k % latents.len()].clone();
                 let pose = b.poses[k % b.poses.len()].clone();
-                let start = HumanState {
+                let mut start = HumanState {
                     translation: truth.translation + line * offset_m,
                     rotation: irmirror_geom::rotation::axis_angle_to_matrix(
                         &(up * turn_deg.to_radians()),
@@ -499,6 +505,15 @@ fn probe_basin(
                     latent,
                     residual: Vec::new(),
                 };
+                if pose == BANK {
+                    let mut scfg = problem.search_config(&problem.prior_weighted(&hcfg));
+                    if scfg.search.pose_bank == 0 {
+                        scfg.search.pose_bank = 64;
+                    }
+                    start = problem
+                        .bank_swap(vec![start], &scfg, seed.wrapping_add(k as u64))?
+                        .remove(0);
+                }
                 let end = refine_as_fit(problem, &start, &hcfg, edge, seed.wrapping_add(k as u64))?;
                 let Some(end) = end else {
                     return Ok(BasinStart {

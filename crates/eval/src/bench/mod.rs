@@ -12,7 +12,7 @@ mod run;
 mod table;
 
 pub use diagnosis::{
-    BasinProbe, BasinStart, Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M,
+    BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M,
     TRUTH_LATENT,
 };
 pub use run::run;

@@ -44,6 +44,7 @@
 //!   full-ray loss is kept; the `top_k` distinct ones are reported, the best one's front/back
 //!   partner among them.
 
+mod bank;
 mod edge;
 mod observe;
 mod problem;

@@ -1,0 +1,239 @@
+//! The pose bank: the search's survivors tried in many poses.
+//!
+//! The search's grid places and turns the body in three pose modes; its rounds then move the
+//! pose by gradient steps, which stay in the basin of the mode they started from. Placed at the
+//! true root and facing, refinement from a template ended at twice the data term it reached
+//! from the prior's encoding of the true pose (held-out bowls: 0.34–0.36 against 0.18, README
+//! "Fourteenth run"): the pose's local minima, not the place, held the bowls' fits. So each
+//! survivor is also tried in `pose_bank` poses spread over what the prior was trained on — the
+//! real poses of `assets/poses/mocap_deepmimic.safetensors` and their mirror images, and the
+//! activity templates (never the benchmark's persons) — chosen by farthest-point sampling in
+//! joint-rotation space. Each is scored at the survivor's root and facing (its feet moved to the
+//! floor when the floor is known) with one forward pass; the best `bank_keep` per survivor take
+//! the last round's steps, and the best of them replaces the survivor if its loss after those
+//! steps is lower than the survivor's (held-out figures: README, "Fifteenth run").
+
+use super::scratch::Scratch;
+use super::{HumanConfig, HumanProblem, HumanState};
+use crate::ReconError;
+use irmirror_body::prior::generator::{PoseGenerator, TEMPLATES};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// A pose to start from: its latent and its root's height above its lowest vertex, standing
+/// upright (where the root goes when the feet are on the floor).
+#[derive(Clone, Debug)]
+pub(super) struct PoseMode {
+    pub latent: Vec<f64>,
+    pub root_height: f64,
+}
+
+/// Squared distance of two poses: the sum over body joints of their rotation vectors'.
+fn pose_distance2(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .skip(1)
+        .map(|(x, y)| (0..3).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>())
+        .sum()
+}
+
+/// Greedy farthest-point sampling: `n` indices of `poses`, from the first on.
+fn farthest_points(poses: &[Vec<[f64; 3]>], n: usize) -> Vec<usize> {
+    let mut chosen = Vec::with_capacity(n.min(poses.len()));
+    if poses.is_empty() || n == 0 {
+        return chosen;
+    }
+    chosen.push(0);
+    let mut nearest: Vec<f64> = poses.iter().map(|p| pose_distance2(p, &poses[0])).collect();
+    while chosen.len() < n.min(poses.len()) {
+        let (far, _) = nearest
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .expect("not empty");
+        chosen.push(far);
+        for (d, p) in nearest.iter_mut().zip(poses) {
+            *d = d.min(pose_distance2(p, &poses[far]));
+        }
+    }
+    chosen
+}
+
+impl HumanProblem<'_> {
+    /// The mode of one pose (rotation vectors, root ignored) at the height slider `height`.
+    pub(super) fn pose_mode(
+        &self,
+        rotvecs: &[[f64; 3]],
+        height: f64,
+    ) -> Result<PoseMode, ReconError> {
+        let latent = self.prior.encode(rotvecs)?;
+        let st = HumanState {
+            translation: Vector3::zeros(),
+            rotation: Matrix3::identity(),
+            height,
+            latent,
+            residual: Vec::new(),
+        };
+        // Anny's own frame is Z up: the identity root stands upright.
+        let body = super::posed_body(self.model, self.prior, &st)?;
+        let lowest = body
+            .vertices
+            .iter()
+            .map(|v| v.z)
+            .fold(f64::INFINITY, f64::min);
+        Ok(PoseMode {
+            latent: st.latent,
+            root_height: -lowest,
+        })
+    }
+
+    /// `n` poses spread over the prior's training poses (module docs), deterministic.
+    pub(super) fn pose_bank(&self, n: usize, height: f64) -> Result<Vec<PoseMode>, ReconError> {
+        let generator = PoseGenerator::new(self.model);
+        let mut rng = irmirror_geom::rng::seeded(0, 43);
+        let mut poses: Vec<Vec<[f64; 3]>> = TEMPLATES
+            .iter()
+            .filter_map(|name| generator.template(name, &mut rng))
+            .collect();
+        for p in irmirror_body::mocap::MocapSet::prior_training()?.poses {
+            poses.push(generator.mirrored(&p));
+            poses.push(p);
+        }
+        farthest_points(&poses, n)
+            .into_par_iter()
+            .map(|i| self.pose_mode(&poses[i], height))
+            .collect()
+    }
+
+    /// `st` in pose `mode`: the residual dropped, the feet moved to the floor when it is known.
+    pub(super) fn in_mode(&self, st: &HumanState, mode: &PoseMode) -> HumanState {
+        let translation = match self.floor {
+            Some(f) => st.translation + f.up * (mode.root_height - f.height(&st.translation)),
+            None => st.translation,
+        };
+        HumanState {
+            translation,
+            latent: mode.latent.clone(),
+            residual: Vec::new(),
+            ..st.clone()
+        }
+    }
+
+    /// Each survivor tried in the bank's poses (module docs); the survivors, each replaced by
+    /// a better-scoring pose when one was found. `cfg` as the search runs
+    /// ([`Self::search_config`]).
+    pub fn bank_swap(
+        &self,
+        survivors: Vec<HumanState>,
+        cfg: &HumanConfig,
+        seed: u64,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        let s = &cfg.search;
+        if s.pose_bank == 0 || s.bank_keep == 0 || survivors.is_empty() {
+            return Ok(survivors);
+        }
+        let t0 = std::time::Instant::now();
+        let bank = self.pose_bank(s.pose_bank, cfg.height_prior[0])?;
+        let thermal = self.radiometric(cfg).is_some();
+        let sample = self.stratified_batch(s.score_rays, seed, thermal);
+        let batch = sample.batch(s.round_sigma_m2[1]);
+        let score_all = |states: Vec<(usize, HumanState)>| {
+            states
+                .into_par_iter()
+                .map_init(
+                    || None::<Scratch>,
+                    |ws, (i, st)| {
+                        let ws = match ws {
+                            Some(ws) => ws,
+                            None => ws.insert(self.scratch()?),
+                        };
+                        let (loss, _) = self.score(ws, &st, &batch, cfg)?;
+                        Ok((i, loss, st))
+                    },
+                )
+                .collect::<Result<Vec<_>, ReconError>>()
+        };
+
+        let n_tried = match s.bank_survivors {
+            0 => survivors.len(),
+            n => n.min(survivors.len()),
+        };
+        let tried: Vec<(usize, HumanState)> = survivors[..n_tried]
+            .iter()
+            .enumerate()
+            .flat_map(|(i, st)| bank.iter().map(move |m| (i, self.in_mode(st, m))))
+            .collect();
+        let own = score_all(survivors[..n_tried].iter().cloned().enumerate().collect())?;
+        let mut screened = score_all(tried)?;
+        screened.retain(|(_, l, _)| l.is_finite());
+        screened.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let mut starts: Vec<(usize, HumanState)> = Vec::new();
+        for i in 0..n_tried {
+            starts.extend(
+                screened
+                    .iter()
+                    .filter(|t| t.0 == i)
+                    .take(s.bank_keep)
+                    .map(|t| (t.0, t.2.clone())),
+            );
+        }
+        // The last round's steps, as the survivors had.
+        let steps_cfg = HumanConfig {
+            iterations: s.first_steps << s.rounds.saturating_sub(1),
+            sigma_m2: s.round_sigma_m2,
+            lr_residual: 0.0,
+            ..cfg.clone()
+        };
+        let ends: Vec<(usize, f64, HumanState)> = starts
+            .par_iter()
+            .enumerate()
+            .map(|(k, (i, st))| {
+                let run_seed = seed.wrapping_mul(7919).wrapping_add(50_000 + k as u64);
+                let Some((end, _)) =
+                    self.run(st, &steps_cfg, super::Draw::Fixed(batch), run_seed)?
+                else {
+                    return Ok(None);
+                };
+                let mut ws = self.scratch()?;
+                let (loss, _) = self.score(&mut ws, &end, &batch, cfg)?;
+                Ok(loss.is_finite().then_some((*i, loss, end)))
+            })
+            .collect::<Result<Vec<_>, ReconError>>()?
+            .into_iter()
+            .flatten()
+            .collect();
+        let mut out = survivors;
+        let mut best: Vec<f64> = own.iter().map(|o| o.1).collect();
+        let mut swapped = vec![false; n_tried];
+        for (i, loss, end) in ends {
+            if loss < best[i] || !best[i].is_finite() {
+                best[i] = loss;
+                out[i] = end;
+                swapped[i] = true;
+            }
+        }
+        tracing::debug!(
+            "pose bank: {} poses × {n_tried} survivors, {} swapped, {:.2} s",
+            bank.len(),
+            swapped.iter().filter(|&&b| b).count(),
+            t0.elapsed().as_secs_f64()
+        );
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Farthest-point sampling takes the first pose, then the one farthest from it, then the
+    /// one farthest from both — never a near-duplicate while a distinct pose is left.
+    #[test]
+    fn farthest_points_spread_over_the_poses() {
+        let pose = |x: f64| vec![[0.0; 3], [x, 0.0, 0.0]];
+        let poses = [pose(0.0), pose(0.01), pose(1.0), pose(0.5), pose(0.99)];
+        assert_eq!(farthest_points(&poses, 3), vec![0, 2, 3]);
+        assert_eq!(farthest_points(&poses, 9).len(), 5);
+        assert!(farthest_points(&poses, 0).is_empty());
+    }
+}
