@@ -390,13 +390,7 @@ fn stage2_returns_from_perturbed_starts() {
     let (sc, sim, rays) = representable_car_capture(1, ThermalPreset::Boson);
     let root = sim.body.joints[0];
     let (r0, up) = true_root(&sc, &sim);
-    let problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        up,
-        Some(true_floor(&sim, &up)),
-    );
+    let problem = floored_problem(&sim, &rays, up);
     let z = prior().encode(&sc.person.rotvec_rad).unwrap();
     // The body is the mean adult here, so its height is known, and the prior decodes its pose
     // exactly, so no residual is needed: this test is about the return from a perturbed start
@@ -590,13 +584,7 @@ fn the_search_finds_a_person_facing_away() {
         away_deg > 120.0 && mask_px > 200,
         "the scene should show someone facing away: {away_deg:.0}°, {mask_px} px"
     );
-    let problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        up,
-        Some(true_floor(&sim, &up)),
-    );
+    let problem = floored_problem(&sim, &rays, up);
     // Its person is the prior's own decoding: no residual is needed, and this test is about
     // the search's coverage of facings. With the residual on (w_residual 0.1) the right-facing
     // hypothesis ended 30.5° off (root 0.45 m), the best one 131° off at 2.4 cm: the mask's

@@ -80,13 +80,7 @@ fn the_pose_bank_finds_a_pose_the_modes_miss() {
     let sim = irmirror_sim::simulate(model(), &sc, 1).unwrap();
     let rays = true_object_rays(&sc, &sim);
     let (r0, up) = true_root(&sc, &sim);
-    let problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        up,
-        Some(true_floor(&sim, &up)),
-    );
+    let problem = floored_problem(&sim, &rays, up);
     let generator = irmirror_body::prior::generator::PoseGenerator::new(model());
     let mut rng = irmirror_geom::rng::seeded(0, 1);
     let stand = generator.template("stand", &mut rng).unwrap();
@@ -225,13 +219,7 @@ fn the_refinement_descends_its_batch_from_the_truth() {
     for seed in 1..5u64 {
         let (sc, sim, rays) = car_capture(seed);
         let (r0, up) = true_root(&sc, &sim);
-        let problem = problem_for(
-            &sim,
-            &rays,
-            &sim.reflection_mask,
-            up,
-            Some(true_floor(&sim, &up)),
-        );
+        let problem = floored_problem(&sim, &rays, up);
         let latent = prior().encode(&sc.person.rotvec_rad).unwrap();
         let start = HumanState {
             translation: sim.body.joints[0],
@@ -365,13 +353,7 @@ fn with_thermal_car(
     let (sc, sim, _) = car_capture(seed);
     let rays = true_object_footprint_rays(&sc, &sim);
     let (r0, up) = true_root(&sc, &sim);
-    let mut problem = problem_for(
-        &sim,
-        &rays,
-        &sim.reflection_mask,
-        up,
-        Some(true_floor(&sim, &up)),
-    );
+    let mut problem = floored_problem(&sim, &rays, up);
     let pre = thermal_preprocessed(&sc, &sim);
     let rad = radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
     problem.radiometry = Some(&rad);

@@ -162,6 +162,21 @@ pub fn problem_for<'a>(
     }
 }
 
+/// [`problem_for`] with the simulator's reflection mask and the floor under the true body.
+pub fn floored_problem<'a>(
+    sim: &'a irmirror_sim::Simulation,
+    rays: &'a ReflectedRays<f64>,
+    up: Vector3<f64>,
+) -> irmirror_recon::human::HumanProblem<'a> {
+    problem_for(
+        sim,
+        rays,
+        &sim.reflection_mask,
+        up,
+        Some(true_floor(sim, &up)),
+    )
+}
+
 /// [`problem_for`] with the simulator's reflection mask, the body's true up and no floor.
 pub fn truth_problem<'a>(
     sc: &SceneFile,
