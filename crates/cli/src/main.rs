@@ -226,7 +226,8 @@ enum Command {
         /// The basin probe's start poses (with --basin), start k the k-th modulo their number:
         /// pose-generator templates (stand, walk, sit, reach, …) or `truth-latent` (the pose
         /// prior's encoding of the true pose without its residual) or `bank` ("stand" tried
-        /// in the pose bank's poses first, as the search's survivors are). `--basin 0,0
+        /// in the pose bank's poses first, as `[human.search] pose_bank` tries the search's
+        /// survivors). `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
         /// does the refinement find the pose?
         #[arg(long, value_name = "POSE,...", value_delimiter = ',', requires = "basin", value_parser = parse_basin_pose)]

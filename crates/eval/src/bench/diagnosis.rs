@@ -140,7 +140,7 @@ pub struct BasinProbe {
 pub const TRUTH_LATENT: &str = "truth-latent";
 
 /// A basin start in the search's "stand" pose swapped through the pose bank at the start's
-/// root and facing, as the search does at its survivors (`[human.search] pose_bank`, 64 when
+/// root and facing, as the search does at its survivors (`[human.search] pose_bank`, 32 when
 /// that is 0).
 pub const BANK: &str = "bank";
 
@@ -508,7 +508,7 @@ fn probe_basin(
                 if pose == BANK {
                     let mut scfg = problem.search_config(&problem.prior_weighted(&hcfg));
                     if scfg.search.pose_bank == 0 {
-                        scfg.search.pose_bank = 64;
+                        scfg.search.pose_bank = 32;
                     }
                     start = problem
                         .bank_swap(vec![start], &scfg, seed.wrapping_add(k as u64))?

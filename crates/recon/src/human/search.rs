@@ -28,9 +28,10 @@
 //!    final ranking is on the rise — where front and back
 //!    differ; with 0 the rounds and the refinement fit the rise throughout.
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
-//!    (root > 25 cm or facing > 45° apart, as reported hypotheses), each tried in the pose
-//!    bank's poses at its root and facing (`pose_bank`; [`super::bank`]: kept in the pose that
-//!    scores best after the last round's steps), and the front/back flip of
+//!    (root > 25 cm or facing > 45° apart, as reported hypotheses) — with `pose_bank` > 0
+//!    (off by default) each first tried in the pose bank's poses at its root and facing
+//!    ([`super::bank`]: kept in the pose that scores best after the last round's steps) —,
+//!    and the front/back flip of
 //!    each (turned 180° about the up axis through the root): both run the refinement's
 //!    schedule (σ annealed to `sigma_m2[1]`) and are ranked on all rays. On a reflection of at
 //!    most `refine_rays / 2` pixels the refinement steps on one fixed batch of `refine_rays`
@@ -90,9 +91,11 @@ pub struct SearchConfig {
     pub distinct_cuts: bool,
     /// Refine each survivor's front/back flip too.
     pub flips: bool,
-    /// Poses of the pose bank each survivor is tried in ([`super::bank`]); 0: none. On the
-    /// held-out quick set it lowered the fits' data term in three cells of four and brought
-    /// successes 5 → 7 of 32, for ≈ 1.5–4 s more per frame (README, "Fifteenth run").
+    /// Poses of the pose bank each survivor is tried in ([`super::bank`]); 0 (default): none.
+    /// Off by default: at 32 on the held-out quick set successes went 5 → 7 of 32 and the
+    /// bowls' root median 0.146 → 0.044 m, but per-vertex errors moved both ways (10 captures
+    /// better, 8 worse; the mugs 1 / 5), no interval excluded 0, and a frame took ≈ 10 % longer
+    /// (README, "Fifteenth run").
     pub pose_bank: usize,
     /// The bank's best poses per survivor that take the last round's steps.
     pub bank_keep: usize,
@@ -114,7 +117,7 @@ impl Default for SearchConfig {
             round_sigma_m2: [3e-4, 3e-5],
             distinct_cuts: false,
             flips: true,
-            pose_bank: 32,
+            pose_bank: 0,
             bank_keep: 2,
             bank_survivors: 0,
         }
