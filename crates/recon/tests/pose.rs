@@ -60,7 +60,9 @@ fn the_exact_residual_poses_the_true_rotations() {
 /// the prior's real training poses (its own decoding, the mean adult; car seed 1, Boson, true
 /// objects and mask, the floor), placed at the true root and facing in the search's "stand"
 /// pose. Tried in 32 bank poses, the state that comes back is nearer the true pose (mean
-/// joint-rotation angle) than "stand" was, and scores lower on all rays.
+/// joint-rotation angle) than "stand" was, and scores lower on all rays. The kick is among the
+/// poses the bank spreads its 32 over, so this shows the screening and swap find a pose the
+/// bank holds (measured: 17.2° → 0.9°, loss 0.739 → 0.240), not that it generalises.
 #[test]
 fn the_pose_bank_finds_a_pose_the_modes_miss() {
     use irmirror_geom::rotation::axis_angle_to_matrix;

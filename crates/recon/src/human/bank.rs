@@ -153,7 +153,6 @@ impl HumanProblem<'_> {
                 )
                 .collect::<Result<Vec<_>, ReconError>>()
         };
-
         let n_tried = match s.bank_survivors {
             0 => survivors.len(),
             n => n.min(survivors.len()),
