@@ -13,7 +13,6 @@
 //! the last round's steps, and the best of them replaces the survivor if its loss after those
 //! steps is lower than the survivor's (held-out figures: README, "Fifteenth run").
 
-use super::scratch::Scratch;
 use super::{HumanConfig, HumanProblem, HumanState};
 use crate::ReconError;
 use irmirror_body::prior::generator::{PoseGenerator, TEMPLATES};
@@ -137,44 +136,26 @@ impl HumanProblem<'_> {
         let thermal = self.radiometric(cfg).is_some();
         let sample = self.stratified_batch(s.score_rays, seed, thermal);
         let batch = sample.batch(s.round_sigma_m2[1]);
-        let score_all = |states: Vec<(usize, HumanState)>| {
-            states
-                .into_par_iter()
-                .map_init(
-                    || None::<Scratch>,
-                    |ws, (i, st)| {
-                        let ws = match ws {
-                            Some(ws) => ws,
-                            None => ws.insert(self.scratch()?),
-                        };
-                        let (loss, _) = self.score(ws, &st, &batch, cfg)?;
-                        Ok((i, loss, st))
-                    },
-                )
-                .collect::<Result<Vec<_>, ReconError>>()
-        };
         let n_tried = match s.bank_survivors {
             0 => survivors.len(),
             n => n.min(survivors.len()),
         };
-        let tried: Vec<(usize, HumanState)> = survivors[..n_tried]
+        // Survivor i's trials are the i-th run of `bank.len()` states.
+        let tried: Vec<HumanState> = survivors[..n_tried]
             .iter()
-            .enumerate()
-            .flat_map(|(i, st)| bank.iter().map(move |m| (i, self.in_mode(st, m))))
+            .flat_map(|st| bank.iter().map(move |m| self.in_mode(st, m)))
             .collect();
-        let own = score_all(survivors[..n_tried].iter().cloned().enumerate().collect())?;
-        let mut screened = score_all(tried)?;
-        screened.retain(|(_, l, _)| l.is_finite());
-        screened.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let own = self.score_states(survivors[..n_tried].to_vec(), &batch, cfg)?;
         let mut starts: Vec<(usize, HumanState)> = Vec::new();
+        let mut screened = self.score_states(tried, &batch, cfg)?.into_iter();
         for i in 0..n_tried {
-            starts.extend(
-                screened
-                    .iter()
-                    .filter(|t| t.0 == i)
-                    .take(s.bank_keep)
-                    .map(|t| (t.0, t.2.clone())),
-            );
+            let mut mine: Vec<(f64, HumanState)> = screened
+                .by_ref()
+                .take(bank.len())
+                .filter(|(l, _)| l.is_finite())
+                .collect();
+            mine.sort_by(|a, b| a.0.total_cmp(&b.0));
+            starts.extend(mine.into_iter().take(s.bank_keep).map(|(_, st)| (i, st)));
         }
         // The last round's steps, as the survivors had.
         let steps_cfg = HumanConfig {
@@ -202,7 +183,7 @@ impl HumanProblem<'_> {
             .flatten()
             .collect();
         let mut out = survivors;
-        let mut best: Vec<f64> = own.iter().map(|o| o.1).collect();
+        let mut best: Vec<f64> = own.iter().map(|o| o.0).collect();
         let mut swapped = vec![false; n_tried];
         for (i, loss, end) in ends {
             if loss < best[i] || !best[i].is_finite() {

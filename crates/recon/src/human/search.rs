@@ -92,10 +92,10 @@ pub struct SearchConfig {
     /// Refine each survivor's front/back flip too.
     pub flips: bool,
     /// Poses of the pose bank each survivor is tried in ([`super::bank`]); 0 (default): none.
-    /// Off by default: at 32 on the held-out quick set successes went 5 → 7 of 32 and the
-    /// bowls' root median 0.146 → 0.044 m, but per-vertex errors moved both ways (10 captures
-    /// better, 8 worse; the mugs 1 / 5), no interval excluded 0, and a frame took ≈ 10 % longer
-    /// (README, "Fifteenth run").
+    /// Off by default: at 32 on the held-out quick set successes went 5 → 7 of 32, but
+    /// per-vertex errors moved both ways (10 captures better, 8 worse; the mugs 1 / 5), no
+    /// interval excluded 0, on 24 more bowls and 24 cars it gained nothing (successes 10 → 9,
+    /// 9 → 7), and a frame took ≈ 10 % longer (README, "Fifteenth run").
     pub pose_bank: usize,
     /// The bank's best poses per survivor that take the last round's steps.
     pub bank_keep: usize,
@@ -262,6 +262,30 @@ impl HumanProblem<'_> {
         Ok(out)
     }
 
+    /// Each state's loss on `batch` as it stands (no gradient, no steps), in parallel with one
+    /// scratch per thread; the states in their order.
+    pub(super) fn score_states(
+        &self,
+        states: Vec<HumanState>,
+        batch: &Batch<'_>,
+        cfg: &HumanConfig,
+    ) -> Result<Vec<(f64, HumanState)>, ReconError> {
+        states
+            .into_par_iter()
+            .map_init(
+                || None::<Scratch>,
+                |ws, st| {
+                    let ws = match ws {
+                        Some(ws) => ws,
+                        None => ws.insert(self.scratch()?),
+                    };
+                    let (loss, _) = self.score(ws, &st, batch, cfg)?;
+                    Ok((loss, st))
+                },
+            )
+            .collect()
+    }
+
     /// Successive halving over `candidates` (module docs): the survivors, best first.
     fn halve(
         &self,
@@ -284,20 +308,7 @@ impl HumanProblem<'_> {
             rise: None,
             ..batch
         };
-        let mut scored: Vec<(f64, HumanState)> = candidates
-            .into_par_iter()
-            .map_init(
-                || None::<Scratch>,
-                |ws, st| {
-                    let ws = match ws {
-                        Some(ws) => ws,
-                        None => ws.insert(self.scratch()?),
-                    };
-                    let (loss, _) = self.score(ws, &st, &coarse, cfg)?;
-                    Ok((loss, st))
-                },
-            )
-            .collect::<Result<Vec<_>, ReconError>>()?;
+        let mut scored = self.score_states(candidates, &coarse, cfg)?;
         scored.retain(|(l, _)| l.is_finite());
         tracing::debug!("screening: {:.2} s", t0.elapsed().as_secs_f64());
         scored.sort_by(|a, b| a.0.total_cmp(&b.0));
