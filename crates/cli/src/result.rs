@@ -266,7 +266,7 @@ pub fn write(stage: &Staging, prefix: &str, inputs: &ResultInputs<'_>) -> Result
         "human": {
             "note": "hypotheses[0] is the best by loss; the others are distinct (root > 25 cm apart or facing > 45° apart), the best one's front/back partner first; compare their losses.",
             "notes": notes(rec),
-            "shape": "the mean adult's phenotype with the fitted height slider (hypotheses[].height, stature_m)",
+            "shape": "the build (hypotheses[].build: the mean adult's phenotype unless [human] build names one) with the fitted height slider (hypotheses[].height, stature_m)",
             "data_term": rec.human.data_term,
             "hypotheses": rec.human.hypotheses,
             "rotvec_rad": decoded,

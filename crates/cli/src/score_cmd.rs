@@ -41,6 +41,9 @@ struct HypothesisFile {
     translation_m: [f64; 3],
     root_rotvec_rad: [f64; 3],
     height: f64,
+    /// Absent in results written before the build was configurable: the mean adult's.
+    #[serde(default)]
+    build: irmirror_body::Phenotype,
     latent: Vec<f64>,
     /// Absent in results without a pose residual.
     #[serde(default)]
@@ -90,6 +93,7 @@ pub fn read_result(dir: &Path, model: &BodyModel, prior: &PosePrior) -> Result<R
             .chain(&h.latent)
             .chain(&h.residual)
             .chain([&h.height])
+            .chain(h.build.values().iter())
             .all(|x| x.is_finite());
         if !finite {
             bail!(
@@ -103,6 +107,7 @@ pub fn read_result(dir: &Path, model: &BodyModel, prior: &PosePrior) -> Result<R
                 h.root_rotvec_rad,
             )),
             height: h.height,
+            build: h.build,
             latent: h.latent.clone(),
             residual: h.residual.clone(),
         };

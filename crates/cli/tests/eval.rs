@@ -95,8 +95,9 @@ fn eval_probes_the_refinement_basin() {
     }
 }
 
-/// `eval --variants full,true-objects --basin 0,0 --basin-poses …`: the oracle run sees the
-/// simulator's objects (its own table, paired with the fit), and the basin probe starts from
+/// `eval --variants full,true-objects,true-shape,true-radiometry --basin 0,0 --basin-poses …`:
+/// the oracle runs see the simulator's objects, the person's body shape and surface
+/// temperatures (each its own table, paired with the fit), and the basin probe starts from
 /// the true root and facing with the poses asked, in turn (`bank`: through the pose bank); an
 /// unknown pose is a clear error.
 #[test]
@@ -107,7 +108,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
             "--cell",
             "tabletop-bowl",
             "--variants",
-            "full,true-objects",
+            "full,true-objects,true-shape,true-radiometry",
             "--basin",
             "0,0",
             "--basin-poses",
@@ -118,7 +119,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     let c = &results["captures"][0];
-    for v in ["full", "true-objects"] {
+    for v in ["full", "true-objects", "true-shape", "true-radiometry"] {
         assert!(c["variants"][v]["eval"]["root_error_m"].is_f64(), "{c}");
     }
     let poses: Vec<&str> = c["diagnosis"]["basin"]
@@ -131,6 +132,8 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
     for row in [
         "within 15 cm and 30°, true objects / fitted objects",
+        "within 15 cm and 30°, true shape / fitted shape",
+        "within 15 cm and 30°, true temperatures / cited ranges",
         "| tabletop-bowl | 1 | walk | 2 (±0.00 m, ±0°) |",
         "| tabletop-bowl | 1 | truth-latent | 1 (±0.00 m, ±0°) |",
         "| tabletop-bowl | 1 | bank | 1 (±0.00 m, ±0°) |",

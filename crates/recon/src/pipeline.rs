@@ -373,6 +373,7 @@ pub fn human_problem<'a>(
         objects_centre: centre,
         floor: floor(objects, hcfg),
         radiometry,
+        build: hcfg.build,
     }
 }
 
@@ -389,7 +390,13 @@ pub fn radiometry(
         return Ok((None, "mask".into()));
     }
     match Radiometry::new(pre, rays, model) {
-        Ok(r) => Ok((Some(r), "radiometric".into())),
+        Ok(r) => Ok((
+            Some(match hcfg.radiometric.region_temperatures_c {
+                Some(t) => r.centred_at(t),
+                None => r,
+            }),
+            "radiometric".into(),
+        )),
         Err(ReconError::Config(why)) => {
             tracing::warn!("stage 2 fits the binary mask: {why}");
             Ok((None, format!("mask (fallback: {why})")))

@@ -40,6 +40,7 @@ fn stage2_improves_a_perturbed_start_on_a_car_capture() {
         rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(problem.up * 20f64.to_radians()))
             * r0,
         height: HEIGHT_MEAN,
+        build: Default::default(),
         latent: prior().encode(rv).unwrap(),
         residual: Vec::new(),
     };
@@ -83,6 +84,7 @@ fn a_mask_off_the_objects_is_a_clear_error() {
         objects_centre: nalgebra::Vector3::zeros(),
         floor: None,
         radiometry: None,
+        build: Default::default(),
     };
     let e = fit_human(&problem, &HumanConfig::default(), 0, &|_| {}).unwrap_err();
     assert!(matches!(e, irmirror_recon::ReconError::NoMaskRays), "{e}");
@@ -368,6 +370,7 @@ fn perturbed_starts(
             translation: root + dt,
             rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(up * turn)) * r0,
             height: irmirror_recon::human::HEIGHT_MEAN,
+            build: Default::default(),
             latent: z.to_vec(),
             residual: Vec::new(),
         }
@@ -456,6 +459,7 @@ fn perturbed_starts_report() {
             translation: root,
             rotation: r0,
             height: HEIGHT_MEAN,
+            build: Default::default(),
             latent: z.clone(),
             residual: Vec::new(),
         };
@@ -627,6 +631,7 @@ fn the_active_set_holds_every_ray_the_body_reaches() {
         rotation: irmirror_geom::rotation::axis_angle_to_matrix(&(problem.up * 30f64.to_radians()))
             * r0,
         height: HEIGHT_MEAN,
+        build: Default::default(),
         latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
         residual: Vec::new(),
     };

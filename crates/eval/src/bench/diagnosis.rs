@@ -229,6 +229,7 @@ pub(super) fn diagnose(
         objects_centre: Vector3::zeros(),
         floor: None,
         radiometry: rad.as_ref(),
+        build: hcfg.build,
     };
     let truth: Vec<Vector3<f64>> = p
         .sim
@@ -289,7 +290,7 @@ pub(super) fn diagnose(
         .zip(&hypothesis_facing_errors_deg)
         .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
         .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
-    let truth_state = model_truth(p, priors, &truth, hcfg.lr_residual > 0.0)?;
+    let truth_state = model_truth(p, priors, &truth, (&hcfg.build, hcfg.lr_residual > 0.0))?;
     let (truth_start_loss, truth_start_root_error_m) =
         refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
@@ -502,6 +503,7 @@ fn probe_basin(
                         &(up * turn_deg.to_radians()),
                     ) * truth.rotation,
                     height: hcfg.height_prior[0],
+                    build: hcfg.build,
                     latent,
                     residual: Vec::new(),
                 };
@@ -540,7 +542,7 @@ fn probe_basin(
 
 /// The truth as stage 2's model states it: the true height slider, the pose prior's encoding of
 /// the true pose — with a pose residual (`residual`), each body joint's rotation from that
-/// decoding to the true one, so the pose is exact — mean-adult proportions otherwise, and the
+/// decoding to the true one, so the pose is exact — the fit's build otherwise, and the
 /// root placed by the rigid motion that best aligns that body onto the true mesh `truth` (from
 /// the true root position and rotation): a fit finds the root's place and rotation, so a prior
 /// whose encoding tilts the whole body is not charged for the tilt.
@@ -548,7 +550,7 @@ fn model_truth(
     p: &Prepared,
     priors: BodyPriors<'_>,
     truth: &[Vector3<f64>],
-    residual: bool,
+    (build, residual): (&irmirror_body::Phenotype, bool),
 ) -> Result<HumanState, EvalError> {
     let person = &p.scene.person;
     let latent = priors.prior.encode(&person.rotvec_rad)?;
@@ -562,6 +564,7 @@ fn model_truth(
         rotation: p.sim.body.depth_from_anny.rotation
             * irmirror_geom::rotation::axis_angle_to_matrix(&Vector3::from(person.rotvec_rad[0])),
         height: person.phenotype.height,
+        build: *build,
         latent,
         residual,
     };

@@ -100,22 +100,37 @@ pub enum Variant {
     /// (an oracle, not a method: it separates what stage 1's mirror costs the person from what
     /// stage 2 loses; runs only when `--variants` names it; simple shapes only).
     TrueObjects,
+    /// The full model told each person's true body shape: stage 2's build (`[human] build`) and
+    /// its height prior's mean set to the simulator's phenotype (an oracle, not a method: it
+    /// measures what the mean adult's build costs the person; runs only when `--variants`
+    /// names it).
+    TrueShape,
+    /// The full model told each person's true surface temperatures: the thermal term's
+    /// regions (face, hair, bare skin, clothing) centred at the simulator's instead of their
+    /// cited ranges' centres (an oracle, not a method: it measures what the regions' unknown
+    /// temperatures cost the person; runs only when `--variants` names it).
+    TrueRadiometry,
 }
 
 impl Variant {
     /// Every variant, in the table's column order.
-    pub const ALL: [Variant; 6] = [
+    pub const ALL: [Variant; 8] = [
         Variant::NoEdgeSampling,
         Variant::NoSphereTracing,
         Variant::NoSmoothing,
         Variant::NoRadiometric,
         Variant::Full,
         Variant::TrueObjects,
+        Variant::TrueShape,
+        Variant::TrueRadiometry,
     ];
 
     /// Whether it runs only when asked for by name (`--variants`).
     pub fn on_request_only(self) -> bool {
-        self == Variant::TrueObjects
+        matches!(
+            self,
+            Variant::TrueObjects | Variant::TrueShape | Variant::TrueRadiometry
+        )
     }
 
     /// Whether it runs on every capture (else on the first few of each cell).
@@ -132,6 +147,8 @@ impl Variant {
             Variant::NoRadiometric => "w/o radiometric fit (mask, as the paper)",
             Variant::Full => "full model",
             Variant::TrueObjects => "full model through the true objects (oracle)",
+            Variant::TrueShape => "full model with the true body shape (oracle)",
+            Variant::TrueRadiometry => "full model with the true surface temperatures (oracle)",
         }
     }
 
@@ -142,7 +159,9 @@ impl Variant {
             Variant::NoSphereTracing => Some(Ablation::SphereTracing),
             Variant::NoSmoothing => Some(Ablation::Smoothing),
             Variant::NoRadiometric => Some(Ablation::Radiometric),
-            Variant::Full | Variant::TrueObjects => None,
+            Variant::Full | Variant::TrueObjects | Variant::TrueShape | Variant::TrueRadiometry => {
+                None
+            }
         }
     }
 }

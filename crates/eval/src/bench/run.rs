@@ -238,6 +238,16 @@ fn run_capture(
     for &variant in variants {
         let mut cfg = base.clone();
         cfg.ablate.extend(variant.ablation());
+        if variant == Variant::TrueShape {
+            let truth = p.scene.person.phenotype;
+            cfg.human.build = truth;
+            cfg.human.height_prior[0] = truth.height;
+        }
+        if variant == Variant::TrueRadiometry {
+            let person = &p.scene.person;
+            cfg.human.radiometric.region_temperatures_c =
+                Some(irmirror_body::regions::Region::ALL.map(|r| person.region_temperature(r).0));
+        }
         let t0 = Instant::now();
         // The oracle sees the simulator's objects; every other variant stage 1's.
         let seen = match variant {
@@ -348,6 +358,7 @@ fn random_baseline(
                 translation: p.sim.body.joints[0],
                 rotation: truth_root,
                 height: irmirror_recon::human::HEIGHT_MEAN,
+                build: cfg.human.build,
                 latent,
                 residual: Vec::new(),
             };

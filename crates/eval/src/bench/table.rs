@@ -110,6 +110,16 @@ pub fn markdown_table(r: &Report) -> String {
     s.push_str(&hypotheses_table(r));
     s.push_str(&radiometric_table(r));
     s.push_str(&true_objects_table(r));
+    s.push_str(&paired_table(
+        r,
+        (Variant::TrueShape, "true shape"),
+        (Variant::Full, "fitted shape"),
+    ));
+    s.push_str(&paired_table(
+        r,
+        (Variant::TrueRadiometry, "true temperatures"),
+        (Variant::Full, "cited ranges"),
+    ));
     s.push_str(&basin_table(r));
     s.push_str(&objects_table(r));
     s

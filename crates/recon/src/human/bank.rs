@@ -70,6 +70,7 @@ impl HumanProblem<'_> {
             translation: Vector3::zeros(),
             rotation: Matrix3::identity(),
             height,
+            build: self.build,
             latent,
             residual: Vec::new(),
         };

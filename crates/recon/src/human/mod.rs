@@ -62,8 +62,8 @@ pub use refine::Stratified;
 pub use search::{SearchConfig, fit_human, flipped};
 
 use crate::ReconError;
-use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
+use irmirror_body::{BodyModel, Phenotype};
 use irmirror_capture::Image;
 use irmirror_render::occupancy::Aggregation;
 use irmirror_render::reflect::ReflectedRays;
@@ -146,6 +146,11 @@ pub struct HumanConfig {
     pub height_prior: [f64; 2],
     /// Weight of the height prior `((h − mean) / σ)²`.
     pub w_height: f64,
+    /// The person's build: Anny's phenotype sliders other than the height (its `height` is not
+    /// used: the fit's slider starts at `height_prior`'s mean). Not fitted; the mean adult's by
+    /// default. `eval --variants true-build` gives each capture's true build (an oracle that
+    /// measures what the fixed build costs the person).
+    pub build: Phenotype,
     /// Range of the initial root distances along the mean reflected ray (log-spaced), metres.
     pub init_distance_m: [f64; 2],
     /// The global search before refinement.
@@ -250,6 +255,7 @@ impl Default for HumanConfig {
             table_height_m: 0.75,
             height_prior: [HEIGHT_MEAN, 0.06],
             w_height: 2e-3,
+            build: Phenotype::default(),
             init_distance_m: [0.7, 8.0],
             search: SearchConfig::default(),
             top_k: 3,
@@ -270,6 +276,8 @@ pub struct Hypothesis {
     pub root_rotvec_rad: [f64; 3],
     /// Anny's phenotype height slider (see [`HEIGHT_MEAN`]).
     pub height: f64,
+    /// The build: the phenotype's other sliders ([`HumanConfig::build`]; its `height` unused).
+    pub build: Phenotype,
     /// Stature of the fitted body standing straight (the phenotype's rest mesh), metres.
     pub stature_m: f64,
     /// Pose latent.
@@ -352,6 +360,7 @@ impl FittedRadiometry {
 }
 
 /// Everything a fit needs that does not change between hypotheses.
+#[derive(Clone, Copy)]
 pub struct HumanProblem<'a> {
     /// The body model.
     pub model: &'a BodyModel,
@@ -369,6 +378,8 @@ pub struct HumanProblem<'a> {
     pub floor: Option<Floor>,
     /// The thermal rise per ray for the radiometric data term (`None`: the mask only).
     pub radiometry: Option<&'a radiometric::Radiometry>,
+    /// The person's build ([`HumanConfig::build`]); every state of the problem has it.
+    pub build: Phenotype,
 }
 
 /// A horizontal floor: height of `p` above it = `up · p − offset_m`.
@@ -407,22 +418,20 @@ pub fn upright_facing(up: &Vector3<f64>, facing: &Vector3<f64>) -> Matrix3<f64> 
     Matrix3::from_columns(&[x, y, z])
 }
 
-/// The phenotype stage 2 fits: the mean adult (not the shape basis' origin, coefficients 0, a
-/// 1.84 m body) with the given height slider.
-pub fn phenotype(height: f64) -> irmirror_body::Phenotype {
-    irmirror_body::Phenotype {
-        height,
-        ..irmirror_body::Phenotype::default()
-    }
+/// The phenotype stage 2 fits: a build (by default the mean adult, not the shape basis'
+/// origin, coefficients 0, a 1.84 m body) with the given height slider.
+pub fn phenotype(build: &Phenotype, height: f64) -> Phenotype {
+    Phenotype { height, ..*build }
 }
 
-/// The rest body of a stage-2 state's height slider.
+/// The rest body of a build with a height slider.
 pub fn shaped_body(
     model: &BodyModel,
+    build: &Phenotype,
     height: f64,
 ) -> Result<irmirror_body::ShapedBody<f64>, ReconError> {
     model
-        .shaped_phenotype::<f64>(&phenotype(height))
+        .shaped_phenotype::<f64>(&phenotype(build, height))
         .map_err(ReconError::from)
 }
 
@@ -432,7 +441,7 @@ pub fn posed_body(
     prior: &PosePrior,
     st: &HumanState,
 ) -> Result<irmirror_body::PosedBody<f64>, ReconError> {
-    let shaped = shaped_body(model, st.height)?;
+    let shaped = shaped_body(model, &st.build, st.height)?;
     Ok(model.pose(
         &shaped,
         &irmirror_body::Pose {
@@ -558,6 +567,8 @@ pub struct HumanState {
     pub rotation: Matrix3<f64>,
     /// Height slider (see [`HEIGHT_MEAN`]).
     pub height: f64,
+    /// The build (phenotype sliders but the height, [`HumanConfig::build`]).
+    pub build: Phenotype,
     /// Pose latent.
     pub latent: Vec<f64>,
     /// Per-joint residual rotations beyond the prior's decoding (rotation vectors, rad, 3 per

@@ -104,6 +104,12 @@ pub struct RadiometricConfig {
     /// the edges are most of what the image says, on a 4,000-pixel one a few per cent, for 4×
     /// the rays (a car door's 150,000 object pixels would take 1 GB).
     pub footprint_max_mask_px: usize,
+    /// The person's surface temperature per region when known (°C; clothing, bare skin, face,
+    /// hair: `Region::ALL`'s order): the common offset is fitted about these instead of the
+    /// cited ranges' centres. `eval --variants true-radiometry` gives the simulator's (an
+    /// oracle: it measures what the regions' unknown temperatures cost the person).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region_temperatures_c: Option<[f64; REGIONS]>,
 }
 
 impl Default for RadiometricConfig {
@@ -120,6 +126,7 @@ impl Default for RadiometricConfig {
             polish_lr_scale: 0.25,
             polish_rays: 8000,
             footprint_max_mask_px: 1000,
+            region_temperatures_c: None,
         }
     }
 }
@@ -166,6 +173,16 @@ pub fn contrast_k(temp_k: f64, emissivity: f64, ambient_k: f64) -> f64 {
     emissivity * (band_radiance(temp_k) - band_radiance(ambient_k)) / band_slope(ambient_k)
 }
 
+/// Region `r`'s contrast at `temp_c` (°C) and its slope in the common offset: `[a_r, b_r]`.
+fn contrast_at(r: Region, temp_c: f64, ambient_k: f64) -> [f64; 2] {
+    let th = r.thermal();
+    let t = irmirror_capture::planck::ZERO_C_K + temp_c;
+    [
+        contrast_k(t, th.emissivity, ambient_k),
+        th.emissivity * band_slope(t) / band_slope(ambient_k),
+    ]
+}
+
 impl Radiometry {
     /// From stage 0's rise and background; an error when the capture has no background frames
     /// (the room's temperature is then unknown: the caller falls back to the mask, and says so).
@@ -189,13 +206,8 @@ impl Radiometry {
         let vertex_region = vertex_regions(model)?;
         let triangle_region = triangle_regions(&vertex_region, &model.asset.faces);
         let contrast_at = Region::ALL.map(|r| {
-            let th = r.thermal();
-            let [lo, hi] = th.temp_c;
-            let mid = irmirror_capture::planck::ZERO_C_K + (lo + hi) / 2.0;
-            [
-                contrast_k(mid, th.emissivity, ambient_k),
-                th.emissivity * band_slope(mid) / band_slope(ambient_k),
-            ]
+            let [lo, hi] = r.thermal().temp_c;
+            contrast_at(r, (lo + hi) / 2.0, ambient_k)
         });
         let op = super::observe::observation_operator(rays, pre.psf_sigma_px);
         Ok(Self {
@@ -221,6 +233,15 @@ impl Radiometry {
             vertex_region,
             triangle_region,
         })
+    }
+
+    /// The same observations with the regions' temperatures centred at `temps_c` (°C, in
+    /// `Region::ALL`'s order) instead of their cited ranges' centres.
+    pub fn centred_at(mut self, temps_c: [f64; REGIONS]) -> Self {
+        for (r, t) in Region::ALL.into_iter().zip(temps_c) {
+            self.contrast_at[r.index()] = contrast_at(r, t, self.ambient_k);
+        }
+        self
     }
 
     /// The surface temperature (°C) of region `r` whose fitted contrast is `c` (inverse of the
@@ -511,287 +532,5 @@ impl Radiometry {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::{Rng, SeedableRng};
-
-    /// A small synthetic problem: two objects, every region, pixels of 1–4 rays of their own
-    /// and one of their neighbour's, rises drawn from known scalars.
-    struct Synthetic {
-        rad: Radiometry,
-        occ: Vec<f64>,
-        region: Vec<[f64; REGIONS]>,
-        truth: Scalars,
-    }
-
-    impl Synthetic {
-        /// The term's input with per-pixel `rise` and `weight`, per-ray `occ` and `mix`.
-        fn input<'a>(
-            &'a self,
-            occ: &'a [f64],
-            mix: &'a [[f64; REGIONS]],
-            rise: &'a [f64],
-            weight: Option<&'a [f64]>,
-            share: f64,
-        ) -> TermInput<'a> {
-            TermInput {
-                occ,
-                mix,
-                rise: Rise {
-                    rise_k: rise,
-                    weight,
-                    ..self.rad.rise()
-                },
-                share,
-            }
-        }
-    }
-
-    /// One-hot shares, every fifth ray on a border between two regions.
-    fn mix_of(i: usize) -> [f64; REGIONS] {
-        let mut m = [0.0; REGIONS];
-        if i.is_multiple_of(5) {
-            m[i % 4] = 0.7;
-            m[(i + 1) % 4] = 0.3;
-        } else {
-            m[i % 4] = 1.0;
-        }
-        m
-    }
-
-    fn synthetic(noise: f64) -> Synthetic {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
-        let pixels = 250;
-        // Pixel p's own rays (1–4 of a 4-node footprint), then the previous pixel's first ray
-        // through a point spread: rays shared by two pixels.
-        let mut own = vec![0u32];
-        for p in 0..pixels {
-            own.push(own[p] + 1 + (p % 4) as u32);
-        }
-        let n = own[pixels] as usize;
-        let (mut starts, mut entries) = (vec![0u32], Vec::new());
-        for p in 0..pixels {
-            entries.extend((own[p]..own[p + 1]).map(|i| (i, 0.2)));
-            if p > 0 {
-                entries.push((own[p - 1], 0.1));
-            }
-            starts.push(entries.len() as u32);
-        }
-        let contrast_at = [[7.5, 0.7], [10.5, 0.8], [11.5, 0.8], [8.5, 0.75]];
-        let offset_k = 1.2;
-        let truth = Scalars {
-            reflectance: vec![0.09, 0.06],
-            offset_k,
-            contrast: contrast_at.map(|[a, b]| a + b * offset_k),
-        };
-        let occ: Vec<f64> = (0..n)
-            .map(|i| {
-                if i % 3 == 0 {
-                    0.0
-                } else {
-                    rng.random_range(0.0..1.0)
-                }
-            })
-            .collect();
-        let region: Vec<[f64; REGIONS]> = (0..n).map(mix_of).collect();
-        let object: Vec<u16> = (0..pixels).map(|p| (p / 7 % 2) as u16).collect();
-        let rise: Vec<f64> = (0..pixels)
-            .map(|p| {
-                let covered: f64 = entries[starts[p] as usize..starts[p + 1] as usize]
-                    .iter()
-                    .map(|&(i, w)| {
-                        let i = i as usize;
-                        let c: f64 = region[i]
-                            .iter()
-                            .zip(&truth.contrast)
-                            .map(|(b, c)| b * c)
-                            .sum();
-                        w * c * occ[i]
-                    })
-                    .sum();
-                truth.reflectance[object[p] as usize] * covered
-                    + noise * rng.random_range(-1.0..1.0)
-            })
-            .collect();
-        let rad = Radiometry {
-            pixel: (0..pixels as u32).collect(),
-            rise_k: rise,
-            object,
-            starts,
-            entries,
-            noise_k: 0.05,
-            ambient_k: 295.0,
-            objects: 2,
-            contrast_at,
-            vertex_region: vec![],
-            triangle_region: vec![],
-        };
-        Synthetic {
-            rad,
-            occ,
-            region,
-            truth,
-        }
-    }
-
-    /// `∂D/∂o` and `∂D/∂β` at fixed scalars against central differences (f64), with Huber's
-    /// linear branch active on some rays.
-    #[test]
-    fn loss_gradient_matches_finite_differences() {
-        let sy = synthetic(0.02);
-        let (rad, occ, region) = (&sy.rad, &sy.occ, &sy.region);
-        let rise = &rad.rise_k;
-        let cfg = RadiometricConfig::default();
-        let weight: Vec<f64> = (0..rise.len())
-            .map(|p| 1.0 + (p % 5) as f64 * 0.3)
-            .collect();
-        // Scalars off the truth: large residuals reach Huber's linear branch.
-        let s = Scalars {
-            reflectance: vec![0.2, 0.005],
-            offset_k: -2.0,
-            contrast: [6.0, 9.0, 14.0, 5.0],
-        };
-        let input = |o: &[f64], mix: &[[f64; REGIONS]]| -> f64 {
-            rad.loss(&sy.input(o, mix, rise, Some(&weight), 0.4), &cfg, &s, None)
-        };
-        let (mut d, mut dm) = (Vec::new(), Vec::new());
-        let t = sy.input(occ, region, rise, Some(&weight), 0.4);
-        let l = rad.loss(&t, &cfg, &s, Some((&mut d, &mut dm)));
-        assert!((l - input(occ, region)).abs() < 1e-15);
-        let linear = (0..t.pixels())
-            .filter(|&p| {
-                let pred = s.reflectance[t.object(p)] * t.covered(p, &s.contrast);
-                ((rise[p] - pred) / rad.noise_k).abs() > cfg.huber_sigmas
-            })
-            .count();
-        assert!(linear > 10, "only {linear} pixels on Huber's linear branch");
-        let dmax = d.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        for i in (0..occ.len()).step_by(7) {
-            let h = 1e-6;
-            let (mut p, mut m) = (occ.clone(), occ.clone());
-            p[i] += h;
-            m[i] -= h;
-            let fd = (input(&p, region) - input(&m, region)) / (2.0 * h);
-            assert!(
-                (fd - d[i]).abs() <= 1e-6 * dmax,
-                "ray {i}: {fd} vs {}",
-                d[i]
-            );
-            for r in 0..REGIONS {
-                let (mut p, mut m) = (region.clone(), region.clone());
-                p[i][r] += h;
-                m[i][r] -= h;
-                let fd = (input(occ, &p) - input(occ, &m)) / (2.0 * h);
-                assert!(
-                    (fd - dm[i][r]).abs() <= 1e-6 * dmax.max(1e-3),
-                    "ray {i} region {r}: {fd} vs {}",
-                    dm[i][r]
-                );
-            }
-        }
-    }
-
-    /// The closed-form solve finds the scalars that made the data (noise-free, the priors
-    /// weak against 250 pixels, some rays mixing two regions) — the products `g·c` and the
-    /// offset — and at its result no scalar can be moved to lower the objective it minimises.
-    #[test]
-    fn scalar_solve_recovers_the_truth_and_is_stationary() {
-        let sy = synthetic(0.0);
-        let (rad, truth) = (&sy.rad, &sy.truth);
-        let cfg = RadiometricConfig::default();
-        let t = sy.input(&sy.occ, &sy.region, &rad.rise_k, None, 1e-3);
-        // The product g·c is what the data fix; the priors fix the split. Compare products.
-        let mut s = rad.prior_scalars(&cfg);
-        rad.solve_scalars(&t, &cfg, &mut s, 200);
-        for k in 0..2 {
-            for r in 0..REGIONS {
-                let (got, want) = (
-                    s.reflectance[k] * s.contrast[r],
-                    truth.reflectance[k] * truth.contrast[r],
-                );
-                assert!(
-                    (got - want).abs() < 2e-3 * want,
-                    "object {k} region {r}: {got} vs {want}"
-                );
-            }
-        }
-        // The offset moves every contrast by a few % per kelvin, so it trades with the
-        // reflectance along a shallow valley: known to ± 0.15 K here.
-        assert!((s.offset_k - truth.offset_k).abs() < 0.15, "{}", s.offset_k);
-        // Stationary: the objective (the loss' numerator) does not drop when a scalar moves.
-        let l0 = rad.loss(&t, &cfg, &s, None);
-        for k in 0..3 {
-            for step in [1e-4, -1e-4] {
-                let mut m = s.clone();
-                if k < 2 {
-                    m.reflectance[k] *= 1.0 + step;
-                } else {
-                    m.offset_k += step;
-                    m.contrast = rad.contrast_of(m.offset_k);
-                }
-                assert!(rad.loss(&t, &cfg, &m, None) >= l0 - 1e-12, "scalar {k}");
-            }
-        }
-        // Twelve sweeps (what stage 2 runs) land on the converged objective (`D` ≈ 0 here, the
-        // data being noise-free: within 1e-6 of its scale, 1).
-        let mut s12 = rad.prior_scalars(&cfg);
-        rad.solve_scalars(&t, &cfg, &mut s12, 12);
-        let l12 = rad.loss(&t, &cfg, &s12, None);
-        assert!((l12 - l0).abs() < 1e-6, "12 sweeps: {l12} vs {l0}");
-    }
-
-    /// Where the mirror shows nothing but the body is placed, the solve stops at the bounds: the
-    /// person cools by at most the offset's bound, no object stops reflecting.
-    #[test]
-    fn scalars_stay_within_their_bounds() {
-        let sy = synthetic(0.0);
-        let rad = &sy.rad;
-        let cfg = RadiometricConfig::default();
-        let zero = vec![0.0; rad.rise_k.len()];
-        let t = sy.input(&sy.occ, &sy.region, &zero, None, 1e-3);
-        let mut s = rad.prior_scalars(&cfg);
-        rad.solve_scalars(&t, &cfg, &mut s, 20);
-        assert_eq!(s.offset_k, -cfg.offset_bound_k);
-        assert_eq!(s.contrast, rad.contrast_of(-cfg.offset_bound_k));
-        let [gm, gs] = cfg.reflectance_prior;
-        for g in &s.reflectance {
-            assert!(
-                (g - (gm - cfg.reflectance_bound_sigmas * gs)).abs() < 1e-12,
-                "{g}"
-            );
-        }
-    }
-
-    /// The noise floor: ½ without a threshold, a little less with one (the linear branch grows
-    /// slower), and the sample mean of ψ over Gaussian draws agrees.
-    #[test]
-    fn noise_floor_is_the_mean_huber_score_of_unit_noise() {
-        assert!((huber_noise_mean(1e3) - 0.5).abs() < 1e-9);
-        let m = huber_noise_mean(3.0);
-        assert!(m < 0.5 && m > 0.49, "{m}");
-        let mut rng = rand::rngs::StdRng::seed_from_u64(1);
-        let n = 200_000;
-        let sample: f64 = (0..n)
-            .map(|_| {
-                huber(
-                    rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng),
-                    3.0,
-                )
-                .0
-            })
-            .sum::<f64>()
-            / n as f64;
-        assert!((sample - m).abs() < 5e-3, "{sample} vs {m}");
-    }
-
-    /// Huber's ψ: quadratic inside, linear outside, continuous with a continuous slope.
-    #[test]
-    fn huber_is_continuous_at_its_threshold() {
-        let d = 3.0;
-        let (a, da) = huber(d - 1e-9, d);
-        let (b, db) = huber(d + 1e-9, d);
-        assert!((a - b).abs() < 1e-8 && (da - db).abs() < 1e-8);
-        assert_eq!(huber(-1.0, d), (0.5, -1.0));
-        assert_eq!(huber(-5.0, d).1, -3.0);
-    }
-}
+#[path = "radiometric_tests.rs"]
+mod tests;

@@ -18,7 +18,7 @@ impl HumanProblem<'_> {
     /// stays; a new height reshapes the body).
     pub fn scratch(&self) -> Result<Scratch, ReconError> {
         let height = super::HEIGHT_MEAN;
-        let shaped = shaped_body(self.model, height)?;
+        let shaped = shaped_body(self.model, &self.build, height)?;
         let dz_dheight = self.dz_dheight(height)?;
         let mut direction = shaped.clone();
         irmirror_body::shape::direction_into(&self.model.asset, &dz_dheight, &mut direction);
@@ -54,8 +54,8 @@ impl HumanProblem<'_> {
     /// `∂z/∂h`: the shape coefficients' derivative in the height slider.
     fn dz_dheight(&self, h: f64) -> Result<Vec<f64>, ReconError> {
         let (lo, hi) = ((h - HEIGHT_STEP).max(0.0), (h + HEIGHT_STEP).min(1.0));
-        let zp = self.model.shape_coefficients(&phenotype(hi))?;
-        let zm = self.model.shape_coefficients(&phenotype(lo))?;
+        let zp = self.model.shape_coefficients(&phenotype(&self.build, hi))?;
+        let zm = self.model.shape_coefficients(&phenotype(&self.build, lo))?;
         Ok(zp
             .iter()
             .zip(&zm)
@@ -74,7 +74,7 @@ impl HumanProblem<'_> {
             return Ok(());
         }
         let dz = self.dz_dheight(h)?;
-        let z = self.model.shape_coefficients(&phenotype(h))?;
+        let z = self.model.shape_coefficients(&phenotype(&self.build, h))?;
         let mean = &ws.mean_piece;
         // The derivative by differences carries rounding of ≈ 1e-12; a knot changes it by O(1).
         let on_mean_piece = dz

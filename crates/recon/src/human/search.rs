@@ -252,6 +252,7 @@ impl HumanProblem<'_> {
                     translation: on_ray,
                     rotation,
                     height,
+                    build: self.build,
                     latent: Vec::new(),
                     residual: Vec::new(),
                 };
@@ -578,7 +579,8 @@ pub fn fit_human(
                 translation_m: st.translation.into(),
                 root_rotvec_rad: matrix_to_axis_angle(&st.rotation).into(),
                 height: st.height,
-                stature_m: stature_m(&shaped_body(problem.model, st.height)?),
+                build: st.build,
+                stature_m: stature_m(&shaped_body(problem.model, &st.build, st.height)?),
                 latent: st.latent.clone(),
                 residual: st.residual.clone(),
                 loss: eval.loss,
@@ -645,6 +647,7 @@ mod tests {
             translation: Vector3::new(x, 0.0, 0.0),
             rotation: axis_angle_to_matrix(&(Vector3::z() * yaw_deg.to_radians())),
             height: 0.5,
+            build: irmirror_body::Phenotype::default(),
             latent: Vec::new(),
             residual: Vec::new(),
         }

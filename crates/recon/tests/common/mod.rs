@@ -159,6 +159,7 @@ pub fn problem_for<'a>(
         objects_centre: sim.object_poses[0].translation,
         floor,
         radiometry: None,
+        build: Default::default(),
     }
 }
 
