@@ -410,7 +410,7 @@ mod tests {
             "{t}"
         );
         assert!(
-            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | 0 of 2 | – |"),
+            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | 0 of 2 | 0 of 2 | 0 of 2 | – |"),
             "{t}"
         );
         assert!(
