@@ -389,6 +389,13 @@ pub fn radiometry(
     if !hcfg.radiometric.enabled {
         return Ok((None, "mask".into()));
     }
+    if let Some(t) = hcfg.radiometric.region_temperatures_c
+        && t.iter().any(|x| !(-40.0..=80.0).contains(x))
+    {
+        return Err(ReconError::Config(format!(
+            "[human.radiometric] region_temperatures_c = {t:?}: each must be a surface temperature in °C within −40…80"
+        )));
+    }
     match Radiometry::new(pre, rays, model) {
         Ok(r) => Ok((
             Some(match hcfg.radiometric.region_temperatures_c {

@@ -148,7 +148,7 @@ pub struct HumanConfig {
     pub w_height: f64,
     /// The person's build: Anny's phenotype sliders other than the height (its `height` is not
     /// used: the fit's slider starts at `height_prior`'s mean). Not fitted; the mean adult's by
-    /// default. `eval --variants true-build` gives each capture's true build (an oracle that
+    /// default. `eval --variants true-shape` gives each capture's true build (an oracle that
     /// measures what the fixed build costs the person).
     pub build: Phenotype,
     /// Range of the initial root distances along the mean reflected ray (log-spaced), metres.
