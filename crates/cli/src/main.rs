@@ -227,7 +227,8 @@ enum Command {
         /// pose-generator templates (stand, walk, sit, reach, …) or `truth-latent` (the pose
         /// prior's encoding of the true pose without its residual) or `bank` ("stand" tried
         /// in the pose bank's poses first, as `[human.search] pose_bank` tries the search's
-        /// survivors). `--basin 0,0
+        /// survivors) or `limbs` ("stand" changed part by part by the limb search first, as
+        /// `[human.search] limb_survivors` does). `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
         /// does the refinement find the pose?
         #[arg(long, value_name = "POSE,...", value_delimiter = ',', requires = "basin", value_parser = parse_basin_pose)]
@@ -353,12 +354,12 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
 fn parse_basin_pose(s: &str) -> Result<String, String> {
     use irmirror_body::prior::generator::TEMPLATES;
     let s = s.trim();
-    use irmirror_eval::bench::{BANK, TRUTH_LATENT};
-    if s == TRUTH_LATENT || s == BANK || TEMPLATES.contains(&s) {
+    use irmirror_eval::bench::{BANK, LIMBS, TRUTH_LATENT};
+    if s == TRUTH_LATENT || s == BANK || s == LIMBS || TEMPLATES.contains(&s) {
         Ok(s.to_string())
     } else {
         Err(format!(
-            "{s:?}: one of {}, {TRUTH_LATENT}, {BANK}",
+            "{s:?}: one of {}, {TRUTH_LATENT}, {BANK}, {LIMBS}",
             TEMPLATES.join(", "),
         ))
     }

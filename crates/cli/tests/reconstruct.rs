@@ -191,6 +191,29 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         "{}",
         stderr(&o)
     );
+    // Settings outside their ranges: a clear error naming the setting, no output.
+    for (toml, names) in [
+        (
+            "[human.radiometric]\nregion_temperatures_c = [30.0, 34.0, 200.0, 28.0]\n",
+            "region_temperatures_c",
+        ),
+        ("[human.build]\nmuscle = 1.5\n", "muscle"),
+    ] {
+        std::fs::write(&bad, toml).unwrap();
+        let o = irmirror(&[
+            "reconstruct",
+            cap.to_str().unwrap(),
+            "--out",
+            out4.to_str().unwrap(),
+            "--config",
+            bad.to_str().unwrap(),
+        ]);
+        assert!(
+            !o.status.success() && stderr(&o).contains(names) && !out4.exists(),
+            "{toml}: {}",
+            stderr(&o)
+        );
+    }
     std::fs::remove_file(&bad).ok();
     std::fs::remove_dir_all(&out2).ok();
     std::fs::remove_dir_all(&out3).ok();

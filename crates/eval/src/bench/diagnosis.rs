@@ -144,6 +144,11 @@ pub const TRUTH_LATENT: &str = "truth-latent";
 /// that is 0).
 pub const BANK: &str = "bank";
 
+/// A basin start in the search's "stand" pose changed part by part by the limb search at the
+/// start's root and facing, as the search does at its survivors with `[human.search]
+/// limb_survivors` > 0.
+pub const LIMBS: &str = "limbs";
+
 impl Default for BasinProbe {
     /// ±35 cm and ±35°: about the spacing of the search's grid (eight yaw bins are 45° apart),
     /// so the starts sit where the search's nearest candidate to the truth can be.
@@ -475,7 +480,11 @@ fn probe_basin(
                 if name == TRUTH_LATENT {
                     return Ok(truth.latent.clone());
                 }
-                let name = if name == BANK { "stand" } else { name };
+                let name = if name == BANK || name == LIMBS {
+                    "stand"
+                } else {
+                    name
+                };
                 let rotvecs = generator.template(name, &mut rng).ok_or_else(|| {
                     irmirror_recon::ReconError::Config(format!(
                         "the pose generator has no {name:?} template"
@@ -514,6 +523,13 @@ fn probe_basin(
                     }
                     start = problem
                         .bank_swap(vec![start], &scfg, seed.wrapping_add(k as u64))?
+                        .remove(0);
+                }
+                if pose == LIMBS {
+                    let mut scfg = problem.search_config(&problem.prior_weighted(&hcfg));
+                    scfg.search.limb_survivors = 1;
+                    start = problem
+                        .limb_swap(vec![start], &scfg, seed.wrapping_add(k as u64))?
                         .remove(0);
                 }
                 let end = refine_as_fit(problem, &start, &hcfg, edge, seed.wrapping_add(k as u64))?;

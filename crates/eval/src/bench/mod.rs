@@ -12,8 +12,8 @@ mod run;
 mod table;
 
 pub use diagnosis::{
-    BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M,
-    TRUTH_LATENT,
+    BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, LIMBS, SUCCESS_FACING_DEG,
+    SUCCESS_ROOT_M, TRUTH_LATENT,
 };
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};

@@ -37,7 +37,7 @@ fn pose_distance2(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 }
 
 /// Greedy farthest-point sampling: `n` indices of `poses`, from the first on.
-fn farthest_points(poses: &[Vec<[f64; 3]>], n: usize) -> Vec<usize> {
+pub(super) fn farthest_points(poses: &[Vec<[f64; 3]>], n: usize) -> Vec<usize> {
     let mut chosen = Vec::with_capacity(n.min(poses.len()));
     if poses.is_empty() || n == 0 {
         return chosen;
@@ -59,36 +59,38 @@ fn farthest_points(poses: &[Vec<[f64; 3]>], n: usize) -> Vec<usize> {
 }
 
 impl HumanProblem<'_> {
-    /// The mode of one pose (rotation vectors, root ignored) at the height slider `height`.
+    /// The mode of one pose (rotation vectors, root ignored) of the rest body `shaped`
+    /// ([`super::shaped_body`] of the problem's build at the height slider in question).
     pub(super) fn pose_mode(
         &self,
         rotvecs: &[[f64; 3]],
-        height: f64,
+        shaped: &irmirror_body::ShapedBody<f64>,
     ) -> Result<PoseMode, ReconError> {
         let latent = self.prior.encode(rotvecs)?;
-        let st = HumanState {
-            translation: Vector3::zeros(),
-            rotation: Matrix3::identity(),
-            height,
-            build: self.build,
-            latent,
-            residual: Vec::new(),
-        };
+        let mut rotations = self.prior.decode(&latent)?;
         // Anny's own frame is Z up: the identity root stands upright.
-        let body = super::posed_body(self.model, self.prior, &st)?;
+        rotations[0] = Matrix3::identity();
+        let body = self.model.pose(
+            shaped,
+            &irmirror_body::Pose {
+                rotations,
+                translation: Vector3::zeros(),
+            },
+        )?;
         let lowest = body
             .vertices
             .iter()
             .map(|v| v.z)
             .fold(f64::INFINITY, f64::min);
         Ok(PoseMode {
-            latent: st.latent,
+            latent,
             root_height: -lowest,
         })
     }
 
-    /// `n` poses spread over the prior's training poses (module docs), deterministic.
-    pub(super) fn pose_bank(&self, n: usize, height: f64) -> Result<Vec<PoseMode>, ReconError> {
+    /// What the bank and the limb search choose from: the activity templates (one draw each,
+    /// deterministic), then the prior's real training poses and their mirror images.
+    pub(super) fn source_poses(&self) -> Result<Vec<Vec<[f64; 3]>>, ReconError> {
         let generator = PoseGenerator::new(self.model);
         let mut rng = irmirror_geom::rng::seeded(0, 43);
         let mut poses: Vec<Vec<[f64; 3]>> = TEMPLATES
@@ -99,9 +101,16 @@ impl HumanProblem<'_> {
             poses.push(generator.mirrored(&p));
             poses.push(p);
         }
+        Ok(poses)
+    }
+
+    /// `n` poses spread over the prior's training poses (module docs), deterministic.
+    pub(super) fn pose_bank(&self, n: usize, height: f64) -> Result<Vec<PoseMode>, ReconError> {
+        let poses = self.source_poses()?;
+        let shaped = super::shaped_body(self.model, &self.build, height)?;
         farthest_points(&poses, n)
             .into_par_iter()
-            .map(|i| self.pose_mode(&poses[i], height))
+            .map(|i| self.pose_mode(&poses[i], &shaped))
             .collect()
     }
 

@@ -46,6 +46,7 @@
 
 mod bank;
 mod edge;
+mod limbs;
 mod observe;
 mod problem;
 pub mod radiometric;

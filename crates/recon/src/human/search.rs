@@ -30,9 +30,10 @@
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
 //!    (root > 25 cm or facing > 45° apart, as reported hypotheses) — with `pose_bank` > 0
 //!    (off by default) each first tried in the pose bank's poses at its root and facing
-//!    ([`super::bank`]: kept in the pose that scores best after the last round's steps) —,
-//!    and the front/back flip of
-//!    each (turned 180° about the up axis through the root): both run the refinement's
+//!    ([`super::bank`]: kept in the pose that scores best after the last round's steps), with
+//!    `limb_survivors` > 0 (off) changed part by part ([`super::limbs`]) —, and the front/back
+//!    flip of each (turned 180° about the up axis through the root; with `twin_flips`, off,
+//!    its silhouette twin): both run the refinement's
 //!    schedule (σ annealed to `sigma_m2[1]`) and are ranked on all rays. On a reflection of at
 //!    most `refine_rays / 2` pixels the refinement steps on one fixed batch of `refine_rays`
 //!    rays, edge-focused and importance-weighted ([`HumanProblem::focused_batch`]), at
@@ -101,6 +102,20 @@ pub struct SearchConfig {
     pub bank_keep: usize,
     /// The survivors tried in the bank, best first (0: all).
     pub bank_survivors: usize,
+    /// Configurations per body part the limb search tries ([`super::limbs`]).
+    pub limb_options: usize,
+    /// The limb search's sweeps over the body parts (it stops early when a sweep changes
+    /// nothing).
+    pub limb_sweeps: usize,
+    /// The survivors the limb search starts from, best first; 0 (default): none.
+    pub limb_survivors: usize,
+    /// The best refined hypotheses (by the full loss) the limb polish tries to better
+    /// ([`HumanProblem::limb_polish`]: a limb search at the refined root and facing, then the
+    /// refinement again, kept when lower); 0 (default): none.
+    pub limb_polish: usize,
+    /// Each survivor's partner is its silhouette twin ([`HumanProblem::twin`]: pose mirrored,
+    /// root turned so the outline stays) rather than its root turned 180° (`flipped`).
+    pub twin_flips: bool,
 }
 
 impl Default for SearchConfig {
@@ -120,6 +135,11 @@ impl Default for SearchConfig {
             pose_bank: 0,
             bank_keep: 2,
             bank_survivors: 0,
+            limb_options: 24,
+            limb_sweeps: 2,
+            limb_survivors: 0,
+            limb_polish: 0,
+            twin_flips: false,
         }
     }
 }
@@ -217,6 +237,7 @@ impl HumanProblem<'_> {
         let up = self.up.normalize();
         let mut rng = irmirror_geom::rng::seeded(seed, 21);
         let generator = irmirror_body::prior::generator::PoseGenerator::new(self.model);
+        let shaped = super::shaped_body(self.model, &self.build, height)?;
         let modes: Vec<super::bank::PoseMode> = s
             .pose_modes
             .iter()
@@ -227,7 +248,7 @@ impl HumanProblem<'_> {
                         irmirror_body::prior::generator::TEMPLATES.join(", ")
                     ))
                 })?;
-                self.pose_mode(&rotvecs, height)
+                self.pose_mode(&rotvecs, &shaped)
             })
             .collect::<Result<_, ReconError>>()?;
         if modes.is_empty() {
@@ -397,12 +418,17 @@ impl HumanProblem<'_> {
             .map(|i| ranked[i].clone())
             .collect();
         let survivors = self.bank_swap(survivors, cfg, seed)?;
+        let survivors = self.limb_swap(survivors, cfg, seed)?;
         let mut out = Vec::with_capacity(cfg.inits);
         for st in survivors {
             if flips && out.len() + 1 < cfg.inits.max(2) {
-                let f = HumanState {
-                    rotation: flipped(&self.up, &st.rotation),
-                    ..st.clone()
+                let f = if cfg.search.twin_flips {
+                    self.twin(&st)?
+                } else {
+                    HumanState {
+                        rotation: flipped(&self.up, &st.rotation),
+                        ..st.clone()
+                    }
                 };
                 out.push(st);
                 out.push(f);
@@ -443,6 +469,40 @@ struct Refined {
     state: HumanState,
     curve: Vec<f64>,
     eval: Option<FullEval>,
+}
+
+/// The limb polish of the best `limb_polish` refined hypotheses by the full loss
+/// ([`HumanProblem::limb_polish`]): each replaced when its polish ends lower.
+fn limb_polish(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    (edge_dist, sample): (&irmirror_capture::Image<f64>, Option<&super::Stratified>),
+    seed: u64,
+    refined: &mut [Option<Refined>],
+) -> Result<(), ReconError> {
+    let t0 = std::time::Instant::now();
+    let mut order: Vec<(usize, f64)> = refined
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.as_ref().map(|r| (i, r)))
+        .map(|(i, r)| Ok((i, problem.full_eval(&r.state, cfg)?.loss)))
+        .collect::<Result<_, ReconError>>()?;
+    order.sort_by(|a, b| a.1.total_cmp(&b.1));
+    order.truncate(cfg.search.limb_polish);
+    let states: Vec<HumanState> = order
+        .iter()
+        .map(|&(i, _)| refined[i].as_ref().expect("live").state.clone())
+        .collect();
+    let better = problem.limb_polish(&states, cfg, edge_dist, sample, seed)?;
+    for ((i, _), b) in order.into_iter().zip(better) {
+        if let (Some(r), Some((state, curve))) = (refined[i].as_mut(), b) {
+            r.state = state;
+            r.curve.extend(curve);
+            r.eval = None;
+        }
+    }
+    tracing::debug!("limb polish: {:.2} s", t0.elapsed().as_secs_f64());
+    Ok(())
 }
 
 /// The thermal polish: `polish_iterations` steps on the rise for the best `polish_best` refined
@@ -549,6 +609,15 @@ pub fn fit_human(
             }))
         })
         .collect::<Result<_, ReconError>>()?;
+    if s.limb_polish > 0 {
+        limb_polish(
+            problem,
+            cfg,
+            (&edge_dist, sample.as_ref()),
+            seed,
+            &mut refined,
+        )?;
+    }
     if polish > 0 {
         tracing::debug!("mask refinement: {:.2} s", t0.elapsed().as_secs_f64());
         polish_rise(problem, cfg, seed, &mut refined)?;
