@@ -174,25 +174,12 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
         "everything",
     ]);
     assert!(!o.status.success() && stderr(&o).contains("--ablate"));
-    // A config with an unknown setting: a clear error naming it, no output.
     let bad = tmp("rec-bad.toml");
-    std::fs::write(&bad, "[human]\ninits = 4\nbogus = 1\n").unwrap();
     let out4 = tmp("rec-out4");
-    let o = irmirror(&[
-        "reconstruct",
-        cap.to_str().unwrap(),
-        "--out",
-        out4.to_str().unwrap(),
-        "--config",
-        bad.to_str().unwrap(),
-    ]);
-    assert!(
-        !o.status.success() && stderr(&o).contains("bogus") && !out4.exists(),
-        "{}",
-        stderr(&o)
-    );
-    // Settings outside their ranges: a clear error naming the setting, no output.
+    // A config with an unknown setting, or settings outside their ranges: a clear error
+    // naming the setting, no output.
     for (toml, names) in [
+        ("[human]\ninits = 4\nbogus = 1\n", "bogus"),
         (
             "[human.radiometric]\nregion_temperatures_c = [30.0, 34.0, 200.0, 28.0]\n",
             "region_temperatures_c",
