@@ -9,7 +9,11 @@
 //! the rest kept; a change is kept when it lowers the score (one forward pass per try, the feet
 //! moved to the floor when it is known), sweep after sweep (coordinate descent on a discrete
 //! set). The pose tried is encoded by the prior, as every pose the search states. The result
-//! then takes the last round's steps and replaces the survivor when its loss is lower.
+//! then takes the last round's steps and replaces the survivor when its loss is lower; or,
+//! as a polish of refined hypotheses, the full refinement. Placed at the true root and facing
+//! it reaches near the prior's encoding of the true pose; in the pipeline it lowers the loss
+//! of whichever facing it is handed and recovered no more people, so both uses are off by
+//! default (README, "Seventeenth run").
 
 use super::bank::farthest_points;
 use super::{HumanConfig, HumanProblem, HumanState};
@@ -277,10 +281,11 @@ impl HumanProblem<'_> {
     /// across the objects→person line — the pose mirrored left/right (re-encoded by the prior;
     /// the residual folded in, then dropped) and the root turned by twice the angle between
     /// that line and the body's left–right axis (180° for a person facing the objects). Seen
-    /// along that line the two cast the same outline (orthographic: exactly; through a curved
-    /// mirror: nearly), so a binary silhouette cannot choose between them; the thermal rise
-    /// (face against hair, clothing against skin) can. The front/back partner
-    /// [`super::flipped`] turns the root alone, which mirrors the outline.
+    /// orthographically along that line the two cast the same outline; a convex mirror 1 m
+    /// away is a wide perspective, though, and the data term sharp (tabletop seed 1: twin
+    /// 0.318, truth 0.065, the truth moved 2 cm: 0.211), so the twin is the turned pose's
+    /// start, not its equal. The front/back partner [`super::flipped`] turns the root alone,
+    /// which keeps the arms and legs on the survivor's sides.
     pub fn twin(&self, st: &HumanState) -> Result<HumanState, ReconError> {
         use irmirror_geom::rotation::matrix_to_axis_angle;
         use nalgebra::{Matrix3, Vector3};
