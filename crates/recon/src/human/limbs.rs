@@ -1,9 +1,9 @@
 //! The limb search: a survivor's pose changed one body part at a time.
 //!
-//! The pose bank ([`super::bank`]) tries whole poses; placed at the true root and facing its
-//! best ended at 0.30–0.33 data term on held-out bowls where the prior's encoding of the true
-//! pose reached 0.18 (README, "Sixteenth run"): a person's legs, arms and head seldom match one
-//! training pose together. So each survivor's pose is changed part by part — left leg, right
+//! Placed at the true root and facing, refinements from the search's templates ended at
+//! 0.30–0.33 data term on held-out bowls where the prior's encoding of the true pose reached
+//! 0.18 (README, "Sixteenth run"), and the pose bank ([`super::bank`]) tries whole poses: a
+//! person's legs, arms and head seldom match one training pose together. So each survivor's pose is changed part by part — left leg, right
 //! leg, torso, left arm, right arm, head — each tried in `limb_options` configurations spread
 //! (farthest-point sampling, that part's joints alone) over the same source poses as the bank's,
 //! the rest kept; a change is kept when it lowers the score (one forward pass per try, the feet
@@ -62,6 +62,20 @@ pub(super) struct PartOptions {
 }
 
 impl HumanProblem<'_> {
+    /// The pose `st` states (rotation vectors, root zero): the latent's decoding with the
+    /// residual folded in.
+    fn folded_pose(&self, st: &HumanState) -> Result<Vec<[f64; 3]>, ReconError> {
+        use irmirror_geom::rotation::matrix_to_axis_angle;
+        let rotations = super::joint_rotations(self.prior, st)?;
+        Ok(std::iter::once([0.0; 3])
+            .chain(
+                rotations[1..]
+                    .iter()
+                    .map(|m| matrix_to_axis_angle(m).into()),
+            )
+            .collect())
+    }
+
     /// `n` configurations of each body part, spread over the source poses.
     pub(super) fn part_options(&self, n: usize) -> Result<Vec<PartOptions>, ReconError> {
         let poses = self.source_poses()?;
@@ -95,7 +109,8 @@ impl HumanProblem<'_> {
     }
 
     /// Coordinate descent over body parts from `st` (module docs): the best state found (no
-    /// residual), its score, and whether any part changed. `cfg` as the search runs; `batch` the rounds' fixed batch.
+    /// residual), its score, and whether any part changed. `cfg` as the search runs; `batch`
+    /// the rounds' fixed batch.
     pub(super) fn limb_search(
         &self,
         st: &HumanState,
@@ -104,17 +119,8 @@ impl HumanProblem<'_> {
         batch: &super::Batch<'_>,
         cfg: &HumanConfig,
     ) -> Result<(f64, HumanState, bool), ReconError> {
-        use irmirror_geom::rotation::matrix_to_axis_angle;
-        // The pose as the state states it, its residual folded in; the tries have none, so
-        // neither has the state they are measured against.
-        let rotations = super::joint_rotations(self.prior, st)?;
-        let mut pose: Vec<[f64; 3]> = std::iter::once([0.0; 3])
-            .chain(
-                rotations[1..]
-                    .iter()
-                    .map(|m| matrix_to_axis_angle(m).into()),
-            )
-            .collect();
+        // The tries have no residual, so neither has the state they are measured against.
+        let mut pose = self.folded_pose(st)?;
         let start = if st.residual.is_empty() {
             st.clone()
         } else {
@@ -232,9 +238,7 @@ impl HumanProblem<'_> {
         );
         Ok(out)
     }
-}
 
-impl HumanProblem<'_> {
     /// The limb polish: each of `states` (refined hypotheses) searched part by part at its
     /// refined root and facing, then refined again as [`Self::refine`] does; per state, the
     /// new one and its loss curve when its full loss ([`Self::full_eval`]) is lower, else
@@ -274,9 +278,7 @@ impl HumanProblem<'_> {
             })
             .collect()
     }
-}
 
-impl HumanProblem<'_> {
     /// The silhouette twin of `st`: its body reflected through the root in the vertical plane
     /// across the objects→person line — the pose mirrored left/right (re-encoded by the prior;
     /// the residual folded in, then dropped) and the root turned by twice the angle between
@@ -287,7 +289,6 @@ impl HumanProblem<'_> {
     /// start, not its equal. The front/back partner [`super::flipped`] turns the root alone,
     /// which keeps the arms and legs on the survivor's sides.
     pub fn twin(&self, st: &HumanState) -> Result<HumanState, ReconError> {
-        use irmirror_geom::rotation::matrix_to_axis_angle;
         use nalgebra::{Matrix3, Vector3};
         let up = self.up.normalize();
         let mut line = st.translation - self.objects_centre;
@@ -298,16 +299,8 @@ impl HumanProblem<'_> {
                 ..st.clone()
             });
         };
-        let rotations = super::joint_rotations(self.prior, st)?;
-        let pose: Vec<[f64; 3]> = std::iter::once([0.0; 3])
-            .chain(
-                rotations[1..]
-                    .iter()
-                    .map(|m| matrix_to_axis_angle(m).into()),
-            )
-            .collect();
-        let mirrored =
-            irmirror_body::prior::generator::PoseGenerator::new(self.model).mirrored(&pose);
+        let mirrored = irmirror_body::prior::generator::PoseGenerator::new(self.model)
+            .mirrored(&self.folded_pose(st)?);
         // The reflection across the plane with normal d, after the body's own left–right one
         // (Anny's X): a proper rotation.
         let reflect = Matrix3::identity() - 2.0 * d * d.transpose();
