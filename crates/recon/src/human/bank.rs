@@ -58,6 +58,18 @@ pub(super) fn farthest_points(poses: &[Vec<[f64; 3]>], n: usize) -> Vec<usize> {
     chosen
 }
 
+/// `cfg` (as the search runs) for the last halving round's steps: what a survivor swapped into
+/// another pose takes, as the survivors had.
+pub(super) fn last_round(cfg: &HumanConfig) -> HumanConfig {
+    let s = &cfg.search;
+    HumanConfig {
+        iterations: s.first_steps << s.rounds.saturating_sub(1),
+        sigma_m2: s.round_sigma_m2,
+        lr_residual: 0.0,
+        ..cfg.clone()
+    }
+}
+
 impl HumanProblem<'_> {
     /// The mode of one pose (rotation vectors, root ignored) of the rest body `shaped`
     /// ([`super::shaped_body`] of the problem's build at the height slider in question).
@@ -168,12 +180,7 @@ impl HumanProblem<'_> {
             starts.extend(mine.into_iter().take(s.bank_keep).map(|(_, st)| (i, st)));
         }
         // The last round's steps, as the survivors had.
-        let steps_cfg = HumanConfig {
-            iterations: s.first_steps << s.rounds.saturating_sub(1),
-            sigma_m2: s.round_sigma_m2,
-            lr_residual: 0.0,
-            ..cfg.clone()
-        };
+        let steps_cfg = last_round(cfg);
         let ends: Vec<(usize, f64, HumanState)> = starts
             .par_iter()
             .enumerate()

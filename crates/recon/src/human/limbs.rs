@@ -206,12 +206,7 @@ impl HumanProblem<'_> {
         let sample = self.stratified_batch(s.score_rays, seed, thermal);
         let batch = sample.batch(s.round_sigma_m2[1]);
         let n_tried = s.limb_survivors.min(survivors.len());
-        let steps_cfg = HumanConfig {
-            iterations: s.first_steps << s.rounds.saturating_sub(1),
-            sigma_m2: s.round_sigma_m2,
-            lr_residual: 0.0,
-            ..cfg.clone()
-        };
+        let steps_cfg = super::bank::last_round(cfg);
         let mut out = survivors;
         let mut swapped = 0;
         for (i, st) in out.iter_mut().take(n_tried).enumerate() {
