@@ -68,6 +68,16 @@ fn missing(what: String) -> BodyError {
 
 /// Per-vertex regions of `model`'s mesh.
 pub fn vertex_regions(model: &BodyModel) -> Result<Vec<Region>, BodyError> {
+    head_regions(model, false)
+}
+
+/// Per-vertex regions with, when `turned`, the head's face and hair turned front to back:
+/// each head vertex takes the region of the head vertex nearest its mirror image across the
+/// head's mid-plane (halfway between its front-most and back-most points, normal to the
+/// nose's direction): the regions of a body whose head faces the other way, a face patch of
+/// the face's size on the back of the head. Comparing a fitted body's data term under both
+/// asks the thermal image alone which way its head faces.
+pub fn head_regions(model: &BodyModel, turned: bool) -> Result<Vec<Region>, BodyError> {
     let shaped = model.shaped_phenotype::<f64>(&Phenotype::default())?;
     let rest = Pose::from_axis_angles(&vec![[0.0; 3]; model.n_joints()], shaped.joint_heads[0]);
     let posed = model.pose(&shaped, &rest)?;
@@ -97,7 +107,7 @@ pub fn vertex_regions(model: &BodyModel) -> Result<Vec<Region>, BodyError> {
         .map(|n| bone(n))
         .collect::<Result<_, _>>()?;
     let k = model.asset.influences;
-    Ok((0..model.n_vertices())
+    let own: Vec<Region> = (0..model.n_vertices())
         .map(|i| {
             let b = model.asset.skin_indices[i * k] as usize;
             let v = posed.vertices[i];
@@ -113,7 +123,30 @@ pub fn vertex_regions(model: &BodyModel) -> Result<Vec<Region>, BodyError> {
                 Region::Clothing
             }
         })
-        .collect())
+        .collect();
+    if !turned {
+        return Ok(own);
+    }
+    let on_head: Vec<usize> = (0..own.len())
+        .filter(|&i| matches!(own[i], Region::Face | Region::Hair))
+        .collect();
+    let depth = |i: usize| (posed.vertices[i] - ears).dot(&front);
+    let (lo, hi) = on_head.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &i| {
+        (lo.min(depth(i)), hi.max(depth(i)))
+    });
+    let mid = (lo + hi) / 2.0;
+    let mut out = own.clone();
+    for &i in &on_head {
+        let image = posed.vertices[i] - front * 2.0 * (depth(i) - mid);
+        let nearest = on_head.iter().copied().min_by(|&a, &b| {
+            let d = |j: usize| (posed.vertices[j] - image).norm_squared();
+            d(a).total_cmp(&d(b))
+        });
+        if let Some(j) = nearest {
+            out[i] = own[j];
+        }
+    }
+    Ok(out)
 }
 
 /// Per-triangle regions: the region at least two of its vertices share (else the first

@@ -472,3 +472,47 @@ fn regions_put_the_face_in_front_and_hair_behind() {
         cloth.len()
     );
 }
+
+/// With the head turned, the face is drawn on the back of the head: the same head vertices
+/// (face or hair), the face's centre behind the hair's, a patch of a face's area (measured
+/// 0.031 m²; the face's own 0.071 m² holds the mouth's and eyes' inner surfaces, which the
+/// mirror images across the head do not land on; the face is meshed far more densely than the
+/// scalp, so vertex counts would not say), and nothing below the neck changed.
+#[test]
+fn the_turned_head_has_its_face_behind() {
+    use irmirror_body::Region;
+    use irmirror_body::regions::{head_regions, triangle_regions, vertex_regions};
+    let model = model();
+    let (own, turned) = (
+        vertex_regions(model).unwrap(),
+        head_regions(model, true).unwrap(),
+    );
+    let shaped = model
+        .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
+        .unwrap();
+    let head = |r: Region| matches!(r, Region::Face | Region::Hair);
+    for i in 0..own.len() {
+        assert_eq!(head(own[i]), head(turned[i]), "vertex {i}");
+        if !head(own[i]) {
+            assert_eq!(own[i], turned[i], "vertex {i}");
+        }
+    }
+    // Area and area-weighted centre of each labelling's face triangles.
+    let face = |regions: &[Region]| {
+        let tri = triangle_regions(regions, &model.asset.faces);
+        let (mut area, mut centre) = (0.0, nalgebra::Vector3::zeros());
+        for (t, r) in model.asset.faces.iter().zip(tri) {
+            if r == Region::Face {
+                let [a, b, c] = t.map(|v| shaped.vertices[v as usize]);
+                let s = (b - a).cross(&(c - a)).norm() / 2.0;
+                area += s;
+                centre += (a + b + c) * (s / 3.0);
+            }
+        }
+        (area, centre / area)
+    };
+    let ((a0, f), (a1, t)) = (face(&own), face(&turned));
+    // Anny's front is −Y.
+    assert!(t.y > f.y + 0.08, "face {f:?}, turned face {t:?}");
+    assert!(0.02 < a1 && a1 < a0, "face areas {a0} m², turned {a1} m²");
+}

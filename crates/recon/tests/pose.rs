@@ -412,6 +412,35 @@ fn the_thermal_polish_descends_from_the_truth() {
     });
 }
 
+/// The thermal image says which way a head faces: at the truth (car seed 1; the true root, the
+/// encoded pose with its exact residual), the rise's data term is lower with the face where the
+/// person's face is than with face and hair turned 180° (`Radiometry::head_turned`).
+#[test]
+fn the_rise_prefers_the_head_facing_its_way() {
+    use irmirror_recon::human::*;
+    with_thermal_car(1, |problem, sc, sim, r0, _| {
+        let cfg = HumanConfig::default();
+        let latent = prior().encode(&sc.person.rotvec_rad).unwrap();
+        let truth = HumanState {
+            translation: sim.body.joints[0],
+            rotation: r0,
+            height: sc.person.phenotype.height,
+            build: Default::default(),
+            residual: residual_to(prior(), &latent, &sc.person.rotvec_rad).unwrap(),
+            latent,
+        };
+        let turned = problem.radiometry.unwrap().head_turned(model()).unwrap();
+        let turned = HumanProblem {
+            radiometry: Some(&turned),
+            ..*problem
+        };
+        let own = problem.full_eval(&truth, &cfg).unwrap().data;
+        let other = turned.full_eval(&truth, &cfg).unwrap().data;
+        eprintln!("data term {own:.4}, head turned {other:.4}");
+        assert!(other > own + 0.005, "{own} vs turned {other}");
+    });
+}
+
 /// The polish keeps the best state it evaluated: every step on one fixed batch at one blur
 /// evaluates the same loss, so at learning rates far too high (20× the polish's, which make
 /// Adam overshoot) from a start 10 cm and 10° off the truth, the state it returns scores no

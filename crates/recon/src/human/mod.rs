@@ -296,6 +296,11 @@ pub struct Hypothesis {
     /// The radiometric scalars fitted at the end (when that data term is on).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radiometry: Option<FittedRadiometry>,
+    /// The data term (all rays) with the head's face and hair turned 180°
+    /// ([`radiometric::Radiometry::head_turned`]); below `data_loss` when the thermal image
+    /// puts this body's face on the other side of its head. `None` for the mask's data term.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub head_turned_data_loss: Option<f64>,
     /// Loss per step (on that step's sampled rays).
     #[serde(skip)]
     pub loss_curve: Vec<f64>,

@@ -50,7 +50,7 @@ use super::observe::Rise;
 use crate::ReconError;
 use crate::preprocess::Preprocessed;
 use irmirror_body::Region;
-use irmirror_body::regions::{triangle_regions, vertex_regions};
+use irmirror_body::regions::{head_regions, triangle_regions, vertex_regions};
 use irmirror_capture::planck::band_radiance;
 use irmirror_render::reflect::ReflectedRays;
 use serde::{Deserialize, Serialize};
@@ -232,6 +232,18 @@ impl Radiometry {
             contrast_at,
             vertex_region,
             triangle_region,
+        })
+    }
+
+    /// The same observations with the head's face and hair turned 180° about the body's up
+    /// axis ([`head_regions`]): a fitted body's data term under these against its own says
+    /// which way the thermal image puts its head, whatever its outline.
+    pub fn head_turned(&self, model: &irmirror_body::BodyModel) -> Result<Self, ReconError> {
+        let vertex_region = head_regions(model, true)?;
+        Ok(Self {
+            triangle_region: triangle_regions(&vertex_region, &model.asset.faces),
+            vertex_region,
+            ..self.clone()
         })
     }
 

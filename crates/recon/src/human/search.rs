@@ -578,6 +578,36 @@ fn polish_rise(
     Ok(())
 }
 
+/// Each kept hypothesis' data term with its head's face and hair turned
+/// ([`Hypothesis::head_turned_data_loss`]), with the radiometric term.
+fn head_cue(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    kept: &mut [(Hypothesis, HumanState)],
+) -> Result<(), ReconError> {
+    let Some(rad) = problem.radiometric(cfg) else {
+        return Ok(());
+    };
+    let t0 = std::time::Instant::now();
+    let turned = rad.head_turned(problem.model)?;
+    let turned = HumanProblem {
+        radiometry: Some(&turned),
+        ..*problem
+    };
+    for (h, s) in kept.iter_mut() {
+        let d = turned.full_eval(s, cfg)?.data;
+        tracing::debug!(
+            "head cue: data {:.4}, head turned {:.4}, loss {:.4}",
+            h.data_loss,
+            d,
+            h.loss
+        );
+        h.head_turned_data_loss = Some(d);
+    }
+    tracing::debug!("head cue: {:.2} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
 /// Fits the person: global search, every survivor refined in parallel, best first, its
 /// front/back partner next, distinct top-k.
 pub fn fit_human(
@@ -662,6 +692,7 @@ pub fn fit_human(
                 data_loss: eval.data,
                 soft_iou: eval.soft_iou,
                 radiometry,
+                head_turned_data_loss: None,
                 loss_curve: r.curve,
             };
             Ok((h, st))
@@ -689,6 +720,7 @@ pub fn fit_human(
             kept.push((h, s));
         }
     }
+    head_cue(problem, cfg, &mut kept)?;
     let mask_rays = problem
         .rays
         .pixel
