@@ -420,15 +420,7 @@ fn the_rise_prefers_the_head_facing_its_way() {
     use irmirror_recon::human::*;
     with_thermal_car(1, |problem, sc, sim, r0, _| {
         let cfg = HumanConfig::default();
-        let latent = prior().encode(&sc.person.rotvec_rad).unwrap();
-        let truth = HumanState {
-            translation: sim.body.joints[0],
-            rotation: r0,
-            height: sc.person.phenotype.height,
-            build: Default::default(),
-            residual: residual_to(prior(), &latent, &sc.person.rotvec_rad).unwrap(),
-            latent,
-        };
+        let truth = exact_truth(sc, sim, r0);
         let turned = problem.radiometry.unwrap().head_turned(model()).unwrap();
         let turned = HumanProblem {
             radiometry: Some(&turned),
@@ -500,15 +492,7 @@ fn the_refinement_descends_its_batch_from_the_truth() {
         let (sc, sim, rays) = car_capture(seed);
         let (r0, up) = true_root(&sc, &sim);
         let problem = floored_problem(&sim, &rays, up);
-        let latent = prior().encode(&sc.person.rotvec_rad).unwrap();
-        let start = HumanState {
-            translation: sim.body.joints[0],
-            rotation: r0,
-            height: sc.person.phenotype.height,
-            build: Default::default(),
-            residual: residual_to(prior(), &latent, &sc.person.rotvec_rad).unwrap(),
-            latent,
-        };
+        let start = exact_truth(&sc, &sim, r0);
         let sample = problem.refine_sample(&cfg, 5);
         assert!(sample.is_some(), "the default refines on a fixed batch");
         let (end, _) = problem
@@ -639,4 +623,23 @@ fn with_thermal_car(
     let rad = radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
     problem.radiometry = Some(&rad);
     f(&problem, &sc, &sim, r0, up);
+}
+
+/// The truth as our model states it exactly: the true root and height, the prior's encoding
+/// of the true pose with the residual that makes it the true pose, the mean adult's build.
+fn exact_truth(
+    sc: &irmirror_sim::SceneFile,
+    sim: &irmirror_sim::Simulation,
+    r0: nalgebra::Matrix3<f64>,
+) -> irmirror_recon::human::HumanState {
+    let latent = prior().encode(&sc.person.rotvec_rad).unwrap();
+    irmirror_recon::human::HumanState {
+        translation: sim.body.joints[0],
+        rotation: r0,
+        height: sc.person.phenotype.height,
+        build: Default::default(),
+        residual: irmirror_recon::human::residual_to(prior(), &latent, &sc.person.rotvec_rad)
+            .unwrap(),
+        latent,
+    }
 }
