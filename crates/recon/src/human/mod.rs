@@ -296,7 +296,7 @@ pub struct Hypothesis {
     /// The radiometric scalars fitted at the end (when that data term is on).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radiometry: Option<FittedRadiometry>,
-    /// The data term (all rays) with the head's face and hair turned 180°
+    /// The data term (all rays) with the head's face and hair turned front to back
     /// ([`radiometric::Radiometry::head_turned`]); below `data_loss` when the thermal image
     /// puts this body's face on the other side of its head. `None` for the mask's data term.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -235,8 +235,8 @@ impl Radiometry {
         })
     }
 
-    /// The same observations with the head's face and hair turned 180° about the body's up
-    /// axis ([`head_regions`]): a fitted body's data term under these against its own says
+    /// The same observations with the head's face and hair turned front to back
+    /// ([`head_regions`]): a fitted body's data term under these against its own says
     /// which way the thermal image puts its head, whatever its outline.
     pub fn head_turned(&self, model: &irmirror_body::BodyModel) -> Result<Self, ReconError> {
         let vertex_region = head_regions(model, true)?;
