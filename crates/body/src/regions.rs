@@ -72,11 +72,11 @@ pub fn vertex_regions(model: &BodyModel) -> Result<Vec<Region>, BodyError> {
 }
 
 /// Per-vertex regions with, when `turned`, the head's face and hair turned front to back:
-/// each head vertex takes the region of the head vertex nearest its mirror image across the
-/// head's mid-plane (halfway between its front-most and back-most points, normal to the
-/// nose's direction): the regions of a body whose head faces the other way, a face patch of
-/// the face's size on the back of the head. Comparing a fitted body's data term under both
-/// asks the thermal image alone which way its head faces.
+/// each head vertex takes the region its mirror image across the head's mid-plane (halfway
+/// between its front-most and back-most points, normal to the nose's direction) would have:
+/// the regions of a body whose head faces the other way, a face-sized patch on the back of
+/// the head. Comparing a fitted body's data term under both asks the thermal image alone
+/// which way its head faces.
 pub fn head_regions(model: &BodyModel, turned: bool) -> Result<Vec<Region>, BodyError> {
     let shaped = model.shaped_phenotype::<f64>(&Phenotype::default())?;
     let rest = Pose::from_axis_angles(&vec![[0.0; 3]; model.n_joints()], shaped.joint_heads[0]);
@@ -107,12 +107,21 @@ pub fn head_regions(model: &BodyModel, turned: bool) -> Result<Vec<Region>, Body
         .map(|n| bone(n))
         .collect::<Result<_, _>>()?;
     let k = model.asset.influences;
-    let own: Vec<Region> = (0..model.n_vertices())
+    // The face rule; with the head turned, applied to the vertex's mirror image across the
+    // head's mid-plane (depth `2·mid − d`, same height).
+    let (head_lo, head_hi) = (0..model.n_vertices())
+        .filter(|&i| model.asset.skin_indices[i * k] as usize == head)
+        .map(|i| (posed.vertices[i] - ears).dot(&front))
+        .fold((f64::MAX, f64::MIN), |(lo, hi), d| (lo.min(d), hi.max(d)));
+    let mirror = turned.then_some(head_lo + head_hi);
+    Ok((0..model.n_vertices())
         .map(|i| {
             let b = model.asset.skin_indices[i * k] as usize;
             let v = posed.vertices[i];
             if b == head {
-                if (v - ears).dot(&front) > FACE_FRONT_M && v.z < eyes.z + HAIRLINE_ABOVE_EYES_M {
+                let d = (v - ears).dot(&front);
+                let d = mirror.map_or(d, |two_mid| two_mid - d);
+                if d > FACE_FRONT_M && v.z < eyes.z + HAIRLINE_ABOVE_EYES_M {
                     Region::Face
                 } else {
                     Region::Hair
@@ -123,30 +132,7 @@ pub fn head_regions(model: &BodyModel, turned: bool) -> Result<Vec<Region>, Body
                 Region::Clothing
             }
         })
-        .collect();
-    if !turned {
-        return Ok(own);
-    }
-    let on_head: Vec<usize> = (0..own.len())
-        .filter(|&i| matches!(own[i], Region::Face | Region::Hair))
-        .collect();
-    let depth = |i: usize| (posed.vertices[i] - ears).dot(&front);
-    let (lo, hi) = on_head.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &i| {
-        (lo.min(depth(i)), hi.max(depth(i)))
-    });
-    let mid = (lo + hi) / 2.0;
-    let mut out = own.clone();
-    for &i in &on_head {
-        let image = posed.vertices[i] - front * 2.0 * (depth(i) - mid);
-        let nearest = on_head.iter().copied().min_by(|&a, &b| {
-            let d = |j: usize| (posed.vertices[j] - image).norm_squared();
-            d(a).total_cmp(&d(b))
-        });
-        if let Some(j) = nearest {
-            out[i] = own[j];
-        }
-    }
-    Ok(out)
+        .collect())
 }
 
 /// Per-triangle regions: the region at least two of its vertices share (else the first

@@ -476,7 +476,7 @@ fn regions_put_the_face_in_front_and_hair_behind() {
 /// With the head turned, the face is drawn on the back of the head: the same head vertices
 /// (face or hair), the face's centre behind the hair's, a patch of a face's area (measured
 /// 0.031 m²; the face's own 0.071 m² holds the mouth's and eyes' inner surfaces, which the
-/// mirror images across the head do not land on; the face is meshed far more densely than the
+/// back of the head has no counterpart of; the face is meshed far more densely than the
 /// scalp, so vertex counts would not say), and nothing below the neck changed.
 #[test]
 fn the_turned_head_has_its_face_behind() {

@@ -225,12 +225,15 @@ enum Command {
         basin: Option<irmirror_eval::bench::BasinProbe>,
         /// The basin probe's start poses (with --basin), start k the k-th modulo their number:
         /// pose-generator templates (stand, walk, sit, reach, …) or `truth-latent` (the pose
-        /// prior's encoding of the true pose without its residual) or `bank` ("stand" tried
+        /// prior's encoding of the true pose without its residual) or `truth-twin` (that start's
+        /// silhouette twin: the pose mirrored, the root turned to face the other way with the
+        /// same outline along the objects→person line) or `bank` ("stand" tried
         /// in the pose bank's poses first, as `[human.search] pose_bank` tries the search's
         /// survivors) or `limbs` ("stand" changed part by part by the limb search first, as
         /// `[human.search] limb_survivors` does). `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
-        /// does the refinement find the pose?
+        /// does the refinement find the pose? `--basin 0,0 --basin-poses
+        /// truth-latent,truth-twin`: can a body facing away explain the capture as well?
         #[arg(long, value_name = "POSE,...", value_delimiter = ',', requires = "basin", value_parser = parse_basin_pose)]
         basin_poses: Vec<String>,
     },
@@ -350,16 +353,16 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
     })
 }
 
-/// `--basin-poses`: a pose-generator template, `truth-latent` or `bank`.
+/// `--basin-poses`: a pose-generator template, `truth-latent`, `truth-twin`, `bank` or `limbs`.
 fn parse_basin_pose(s: &str) -> Result<String, String> {
     use irmirror_body::prior::generator::TEMPLATES;
     let s = s.trim();
-    use irmirror_eval::bench::{BANK, LIMBS, TRUTH_LATENT};
-    if s == TRUTH_LATENT || s == BANK || s == LIMBS || TEMPLATES.contains(&s) {
+    use irmirror_eval::bench::{BANK, LIMBS, TRUTH_LATENT, TRUTH_TWIN};
+    if [TRUTH_LATENT, TRUTH_TWIN, BANK, LIMBS].contains(&s) || TEMPLATES.contains(&s) {
         Ok(s.to_string())
     } else {
         Err(format!(
-            "{s:?}: one of {}, {TRUTH_LATENT}, {BANK}, {LIMBS}",
+            "{s:?}: one of {}, {TRUTH_LATENT}, {TRUTH_TWIN}, {BANK}, {LIMBS}",
             TEMPLATES.join(", "),
         ))
     }

@@ -98,8 +98,9 @@ fn eval_probes_the_refinement_basin() {
 /// `eval --variants full,true-objects,true-shape,true-radiometry --basin 0,0 --basin-poses …`:
 /// the oracle runs see the simulator's objects, the person's body shape and surface
 /// temperatures (each its own table, paired with the fit), and the basin probe starts from
-/// the true root and facing with the poses asked, in turn (`bank`: through the pose bank,
-/// `limbs`: through the limb search); an unknown pose is a clear error.
+/// the true root and facing with the poses asked, in turn (`truth-twin`: the true pose's
+/// silhouette twin, `bank`: through the pose bank, `limbs`: through the limb search); an
+/// unknown pose is a clear error.
 #[test]
 fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     let (o, out) = cheap_eval(
@@ -112,7 +113,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
             "--basin",
             "0,0",
             "--basin-poses",
-            "walk,truth-latent,bank,limbs",
+            "truth-twin,truth-latent,bank,limbs",
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
@@ -128,13 +129,13 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
         .iter()
         .map(|b| b["pose"].as_str().unwrap())
         .collect();
-    assert_eq!(poses, ["walk", "truth-latent", "bank", "limbs"]);
+    assert_eq!(poses, ["truth-twin", "truth-latent", "bank", "limbs"]);
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();
     for row in [
         "within 15 cm and 30°, true objects / fitted objects",
         "within 15 cm and 30°, true shape / fitted shape",
         "within 15 cm and 30°, true temperatures / cited ranges",
-        "| tabletop-bowl | 1 | walk | 1 (±0.00 m, ±0°) |",
+        "| tabletop-bowl | 1 | truth-twin | 1 (±0.00 m, ±0°) |",
         "| tabletop-bowl | 1 | truth-latent | 1 (±0.00 m, ±0°) |",
         "| tabletop-bowl | 1 | bank | 1 (±0.00 m, ±0°) |",
         "| tabletop-bowl | 1 | limbs | 1 (±0.00 m, ±0°) |",
@@ -153,7 +154,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     ]);
     assert!(
         !o.status.success()
-            && ["truth-latent", "bank", "limbs"]
+            && ["truth-latent", "truth-twin", "bank", "limbs"]
                 .iter()
                 .all(|p| stderr(&o).contains(p)),
         "{}",

@@ -139,6 +139,13 @@ pub struct BasinProbe {
 /// (what the latent alone states of the truth; the residual is left to the refinement).
 pub const TRUTH_LATENT: &str = "truth-latent";
 
+/// A basin-probe start turned around: the silhouette twin ([`HumanProblem::twin`]) of the
+/// [`TRUTH_LATENT`] start — the true pose mirrored left to right, the root turned so that a
+/// view along the objects→person line sees the same outline — the best start a body facing
+/// the other way can have. Ending as low as the [`TRUTH_LATENT`] starts means the data term
+/// cannot tell the person from one facing away, however well a search does.
+pub const TRUTH_TWIN: &str = "truth-twin";
+
 /// A basin start in the search's "stand" pose swapped through the pose bank at the start's
 /// root and facing, as the search does at its survivors (`[human.search] pose_bank`, 32 when
 /// that is 0).
@@ -477,7 +484,7 @@ fn probe_basin(
             .poses
             .iter()
             .map(|name| {
-                if name == TRUTH_LATENT {
+                if name == TRUTH_LATENT || name == TRUTH_TWIN {
                     return Ok(truth.latent.clone());
                 }
                 let name = if name == BANK || name == LIMBS {
@@ -516,6 +523,9 @@ fn probe_basin(
                     latent,
                     residual: Vec::new(),
                 };
+                if pose == TRUTH_TWIN {
+                    start = problem.twin(&start)?;
+                }
                 if pose == BANK {
                     let mut scfg = problem.search_config(&problem.prior_weighted(&hcfg));
                     if scfg.search.pose_bank == 0 {

@@ -13,7 +13,7 @@ mod table;
 
 pub use diagnosis::{
     BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, LIMBS, SUCCESS_FACING_DEG,
-    SUCCESS_ROOT_M, TRUTH_LATENT,
+    SUCCESS_ROOT_M, TRUTH_LATENT, TRUTH_TWIN,
 };
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
