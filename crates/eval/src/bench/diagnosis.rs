@@ -131,7 +131,7 @@ pub struct BasinProbe {
     pub turn_deg: f64,
     /// The starts' poses, start k the k-th modulo their number (`eval --basin-poses`): a
     /// template of the pose generator (the search's candidates start from "stand", "walk",
-    /// "sit") or [`TRUTH_LATENT`].
+    /// "sit"), [`TRUTH_LATENT`], [`TRUTH_TWIN`], [`BANK`] or [`LIMBS`].
     pub poses: Vec<String>,
 }
 
@@ -142,7 +142,7 @@ pub const TRUTH_LATENT: &str = "truth-latent";
 /// A basin-probe start turned around: the silhouette twin ([`HumanProblem::twin`]) of the
 /// [`TRUTH_LATENT`] start — the true pose mirrored left to right, the root turned so that a
 /// view along the objects→person line sees the same outline — the best start a body facing
-/// the other way can have. Ending as low as the [`TRUTH_LATENT`] starts means the data term
+/// the other way can have (for a person seen side-on the twin faces nearly the same way). Ending as low as the [`TRUTH_LATENT`] starts means the data term
 /// cannot tell the person from one facing away, however well a search does.
 pub const TRUTH_TWIN: &str = "truth-twin";
 
