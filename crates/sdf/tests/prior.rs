@@ -506,10 +506,12 @@ fn shipped_priors_are_traced_to_their_first_zero_crossing() {
 /// Stage 2 traces a fitted car through its baked copy (`LatentSdf::baked` at 96 cells,
 /// `irmirror_recon`'s `BAKE_CELLS`): on the shipped car prior's first training shape, rays from
 /// 1.7 normalised units hit the baked field where they hit the network, with the network's
-/// normal. Measured (2026-12-01): hits 1.1e-5 apart (median; p99 1.0e-4), normals 0.071° (p99
-/// 0.29°; 64 cells: 0.16° / 0.87°; 128: 0.037° / 0.20°), far within the car fit's own error
-/// (reflected rays 6° from the truth's). Bowls and mugs are not baked: their thin walls bend
-/// within a cell (at 96 cells normals 1.2° and 0.7° off, median).
+/// normal. Measured on the 27,000-step prior (2026-12-03; 238 of 400 rays meet the car): hits
+/// 1.8e-5 apart (median; p99 4.0e-4), normals 0.11° (p99 1.2°; 128 cells: 1.1e-5 / 1.5e-4,
+/// 0.069° / 0.59°). The 9,000-step prior's smoother field baked closer (1.1e-5 / 1.0e-4, 0.071°
+/// / 0.29°): the sharper network bends more within a cell at creases. Both within the car fit's
+/// own error (reflected rays ≈ 1–7° from the truth's). Bowls and mugs are not baked: their thin
+/// walls bend within a cell (at 96 cells normals 1.2° and 0.7° off, median).
 #[test]
 fn a_baked_car_is_traced_where_the_network_is() {
     use irmirror_render::sdf::Sdf;
@@ -550,12 +552,12 @@ fn a_baked_car_is_traced_where_the_network_is() {
     let (dt50, dt99) = (q(&mut dt, 0.5), q(&mut dt, 0.99));
     let (a50, a99) = (q(&mut angle, 0.5), q(&mut angle, 0.99));
     assert!(
-        dt50 < 3e-5 && dt99 < 3e-4,
+        dt50 < 3e-5 && dt99 < 6e-4,
         "hits apart: {dt50:.1e} / {dt99:.1e}"
     );
     assert!(
-        a50 < 0.1 && a99 < 0.4,
-        "normals apart: {a50:.3}° / {a99:.3}°"
+        a50 < 0.15 && a99 < 1.6,
+        "hits apart: {dt50:.1e} / {dt99:.1e}; normals apart: {a50:.3}° / {a99:.3}°"
     );
 }
 
