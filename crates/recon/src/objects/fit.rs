@@ -407,7 +407,8 @@ const SUPPORT_GRID: usize = 16;
 /// …this far below the plane, in units of the object's size (`unit_m`).
 const SUPPORT_DEPTH: f64 = 0.02;
 /// Cells per axis of a fitted car's baked field (`LatentSdf::baked`; ≈ 4.6 s to sample on 2
-/// cores): normals 0.07° from the network's (median; 64 cells 0.16°, 128 cells 0.04° in 11 s).
+/// cores): normals 0.11° from the 27,000-step prior's (median, p99 1.2°; 128 cells 0.07° / 0.59°
+/// in ≈ 11 s; on the 9,000-step prior 96 cells gave 0.07°).
 pub const BAKE_CELLS: usize = 96;
 /// Cells per axis of a fitted bowl's or mug's grid, which only speeds the march: within a band
 /// about the surface the network answers (`LatentSdf::baked_banded`).

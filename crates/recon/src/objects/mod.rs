@@ -206,7 +206,7 @@ impl LearnedShape {
     /// The field the renderer traces, sampled on first use (stage 2; not stage 1's fit, whose
     /// time it would add to): every fitted field is traced over a whole frame (a car: ≈ 10⁶
     /// rays, each a few dozen values), so a car through its baked copy (`fit::BAKE_CELLS`; its
-    /// smooth panels lose 0.07° of normal to it, median), a bowl or mug through a grid that only
+    /// panels lose 0.11° of normal to it, median), a bowl or mug through a grid that only
     /// speeds the march (`fit::BAND_CELLS`; their thin walls bend within a cell, ≈ 1° at 96³),
     /// the network answering near the surface. If sampling fails, the network itself (logged).
     pub fn traced(&self, category: Category) -> Arc<dyn irmirror_render::sdf::Sdf> {
