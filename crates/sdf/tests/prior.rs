@@ -508,9 +508,9 @@ fn shipped_priors_are_traced_to_their_first_zero_crossing() {
 /// 1.7 normalised units hit the baked field where they hit the network, with the network's
 /// normal. Measured on the 27,000-step prior (2026-12-03; 238 of 400 rays meet the car): hits
 /// 1.8e-5 apart (median; p99 4.0e-4), normals 0.11° (p99 1.2°; 128 cells: 1.1e-5 / 1.5e-4,
-/// 0.069° / 0.59°). The 9,000-step prior's smoother field baked closer (1.1e-5 / 1.0e-4, 0.071°
-/// / 0.29°), likely because the sharper network bends more within a cell at creases. Both within the car fit's
-/// own error (reflected rays ≈ 1–7° from the truth's). Bowls and mugs are not baked: their thin
+/// 0.069° / 0.59°). The 9,000-step prior baked closer (1.1e-5 / 1.0e-4, 0.071° / 0.29°),
+/// likely because its field bent less within a cell at creases. Both within the car fit's own
+/// error (reflected rays ≈ 1–7° from the truth's). Bowls and mugs are not baked: their thin
 /// walls bend within a cell (at 96 cells normals 1.2° and 0.7° off, median).
 #[test]
 fn a_baked_car_is_traced_where_the_network_is() {
