@@ -230,7 +230,10 @@ enum Command {
         /// same outline along the objects→person line) or `bank` ("stand" tried
         /// in the pose bank's poses first, as `[human.search] pose_bank` tries the search's
         /// survivors) or `limbs` ("stand" changed part by part by the limb search first, as
-        /// `[human.search] limb_survivors` does). `--basin 0,0
+        /// `[human.search] limb_survivors` does) or `nearest-bank` (the prior's training
+        /// pose nearest the true one: a perfect retrieval) or `truth-latent~S` (the encoding
+        /// with N(0, S²) noise per latent coordinate: how near a pose estimate must land).
+        /// `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
         /// does the refinement find the pose? `--basin 0,0 --basin-poses
         /// truth-latent,truth-twin`: can a body facing away explain the capture as well?
@@ -353,16 +356,23 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
     })
 }
 
-/// `--basin-poses`: a pose-generator template, `truth-latent`, `truth-twin`, `bank` or `limbs`.
+/// `--basin-poses`: a pose-generator template, `truth-latent`, `truth-latent~S`, `truth-twin`,
+/// `bank`, `limbs` or `nearest-bank`.
 fn parse_basin_pose(s: &str) -> Result<String, String> {
     use irmirror_body::prior::generator::TEMPLATES;
     let s = s.trim();
-    use irmirror_eval::bench::{BANK, LIMBS, TRUTH_LATENT, TRUTH_TWIN};
-    if [TRUTH_LATENT, TRUTH_TWIN, BANK, LIMBS].contains(&s) || TEMPLATES.contains(&s) {
+    use irmirror_eval::bench::{
+        BANK, LIMBS, NEAREST_BANK, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
+    };
+    if [TRUTH_LATENT, TRUTH_TWIN, BANK, LIMBS, NEAREST_BANK].contains(&s)
+        || TEMPLATES.contains(&s)
+        || noisy_truth_scale(s).is_some()
+    {
         Ok(s.to_string())
     } else {
         Err(format!(
-            "{s:?}: one of {}, {TRUTH_LATENT}, {TRUTH_TWIN}, {BANK}, {LIMBS}",
+            "{s:?}: one of {}, {TRUTH_LATENT}, {TRUTH_LATENT}~S (S ≥ 0), {TRUTH_TWIN}, {BANK}, \
+             {LIMBS}, {NEAREST_BANK}",
             TEMPLATES.join(", "),
         ))
     }

@@ -86,6 +86,61 @@ fn the_pose_bank_finds_a_pose_the_modes_miss() {
     });
 }
 
+/// The bank by successive halving (`bank_rounds`) finds the kick too: every one of the
+/// bank's poses screened, halved over 2 rounds of steps, and the state that comes back is
+/// nearer the true pose and lower on all rays than "stand" was.
+#[test]
+fn the_pose_bank_by_halving_finds_the_kick() {
+    use irmirror_recon::human::*;
+    with_posed(true, &kick(), |problem, start, angle| {
+        let mut cfg = HumanConfig::default();
+        cfg.search.pose_bank = 32;
+        cfg.search.bank_keep = 1;
+        cfg.search.bank_rounds = 2;
+        let end = problem
+            .bank_swap(vec![start.clone()], &cfg, 0)
+            .unwrap()
+            .remove(0);
+        let (before, after) = (angle(start).0, angle(&end).0);
+        let loss = |st: &HumanState| problem.full_loss(st, &cfg).unwrap().0;
+        let (l0, l1) = (loss(start), loss(&end));
+        eprintln!(
+            "mean joint angle to the truth {before:.1}° → {after:.1}°, loss {l0:.3} → {l1:.3}"
+        );
+        assert!(after < before - 2.0, "{before:.1}° → {after:.1}°");
+        assert!(l1 < l0, "{l0:.3} → {l1:.3}");
+    });
+}
+
+/// The basin probe's `nearest-bank` oracle: for a pose the bank holds (the kick), the nearest
+/// source pose is that pose, so its latent is the kick's own encoding; for "stand" it is not
+/// the kick's.
+#[test]
+fn the_nearest_source_pose_of_a_held_pose_is_itself() {
+    with_posed(true, &kick(), |problem, _, _| {
+        let kick = kick();
+        let want = prior().encode(&kick).unwrap();
+        let got = problem.nearest_source_latent(&kick).unwrap();
+        let worst = want
+            .iter()
+            .zip(&got)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-9, "latent off by {worst:e}");
+        let generator = irmirror_body::prior::generator::PoseGenerator::new(model());
+        let stand = generator
+            .template("stand", &mut irmirror_geom::rng::seeded(0, 1))
+            .unwrap();
+        let other = problem.nearest_source_latent(&stand).unwrap();
+        let apart = other
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(apart > 0.1, "stand's nearest pose is the kick ({apart:e})");
+    });
+}
+
 /// The limb search finds a pose no source pose holds: the kick's legs, a wave's arms, a turned
 /// head — parts of three poses. From "stand" at the true root and facing it comes back nearer
 /// the true body (mean per-vertex distance) and lower on all rays than "stand" and than the

@@ -156,6 +156,24 @@ pub const BANK: &str = "bank";
 /// limb_survivors` > 0.
 pub const LIMBS: &str = "limbs";
 
+/// A basin start in the source pose nearest the true one
+/// ([`HumanProblem::nearest_source_latent`]: the pose prior's training poses, their mirror
+/// images and the generator's templates): what a perfect retrieval over those poses could
+/// start from.
+pub const NEAREST_BANK: &str = "nearest-bank";
+
+/// `truth-latent~S`: the [`TRUTH_LATENT`] start with independent N(0, S²) noise on every
+/// latent coordinate (the prior's latent is N(0, 1)): how close a pose estimate must land for
+/// the refinement to reach the true pose's quality. `None`: not such a name.
+pub fn noisy_truth_scale(name: &str) -> Option<f64> {
+    let s: f64 = name
+        .strip_prefix(TRUTH_LATENT)?
+        .strip_prefix('~')?
+        .parse()
+        .ok()?;
+    (s.is_finite() && s >= 0.0).then_some(s)
+}
+
 impl Default for BasinProbe {
     /// ±35 cm and ±35°: about the spacing of the search's grid (eight yaw bins are 45° apart),
     /// so the starts sit where the search's nearest candidate to the truth can be.
@@ -184,6 +202,9 @@ pub struct BasinStart {
     pub facing_error_deg: Option<f64>,
     /// The data term at the end (all rays, final σ).
     pub data_loss: Option<f64>,
+    /// Mean per-vertex distance from the true mesh at the end, m.
+    #[serde(default)]
+    pub vertex_error_m: Option<f64>,
 }
 
 /// The basin probe's pose before it could be chosen.
@@ -307,7 +328,17 @@ pub(super) fn diagnose(
         refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
     let basin = match basin {
-        Some(b) => probe_basin(&truth_state, b, priors, rec, (seed, cfg))?,
+        Some(b) => probe_basin(
+            (
+                &truth_state,
+                &p.scene.person.rotvec_rad,
+                &p.sim.body.mesh.vertices,
+            ),
+            b,
+            priors,
+            rec,
+            (seed, cfg),
+        )?,
         None => Vec::new(),
     };
     let at_truth = posed_body(model, prior, &truth_state)?;
@@ -461,7 +492,7 @@ fn with_problem<R>(
 /// enough" from "the refinement cannot close the gap" in one run, with far less noise than root
 /// medians over a cell.
 fn probe_basin(
-    truth: &HumanState,
+    (truth, true_pose, true_vertices): (&HumanState, &[[f64; 3]], &[[f32; 3]]),
     b: &BasinProbe,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
@@ -486,6 +517,20 @@ fn probe_basin(
             .map(|name| {
                 if name == TRUTH_LATENT || name == TRUTH_TWIN {
                     return Ok(truth.latent.clone());
+                }
+                if let Some(scale) = noisy_truth_scale(name) {
+                    use rand_distr::{Distribution, StandardNormal};
+                    return Ok(truth
+                        .latent
+                        .iter()
+                        .map(|z| {
+                            let n: f64 = StandardNormal.sample(&mut rng);
+                            z + scale * n
+                        })
+                        .collect());
+                }
+                if name == NEAREST_BANK {
+                    return Ok(problem.nearest_source_latent(true_pose)?);
                 }
                 let name = if name == BANK || name == LIMBS {
                     "stand"
@@ -551,6 +596,7 @@ fn probe_basin(
                         root_error_m: None,
                         facing_error_deg: None,
                         data_loss: None,
+                        vertex_error_m: None,
                     });
                 };
                 Ok(BasinStart {
@@ -560,6 +606,10 @@ fn probe_basin(
                     root_error_m: Some((end.translation - truth.translation).norm()),
                     facing_error_deg: Some(facing_angle_deg(&up, &end.rotation, &truth.rotation)),
                     data_loss: Some(problem.full_eval(&end, &hcfg)?.data),
+                    vertex_error_m: vertex_error(
+                        &posed_body(priors.model, priors.prior, &end)?.vertices,
+                        true_vertices,
+                    ),
                 })
             })
             .collect()
@@ -620,4 +670,25 @@ fn true_objects(p: &Prepared) -> Vec<PlacedSdf> {
             depth_from_object: *pose,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `truth-latent~S` names a noise scale S ≥ 0; anything else is not such a start.
+    #[test]
+    fn noisy_truth_names_parse() {
+        assert_eq!(noisy_truth_scale("truth-latent~0.5"), Some(0.5));
+        assert_eq!(noisy_truth_scale("truth-latent~0"), Some(0.0));
+        for bad in [
+            "truth-latent",
+            "truth-latent~",
+            "truth-latent~-1",
+            "truth-latent~x",
+            "stand~1",
+        ] {
+            assert_eq!(noisy_truth_scale(bad), None, "{bad}");
+        }
+    }
 }

@@ -137,7 +137,7 @@ pub fn basin_table(r: &Report) -> String {
         return String::new();
     }
     let mut s = String::from(
-        "\n| cell | captures probed | start pose | starts (offset, turn) | ended within 15 cm and 30° | diverged | root error at the end, median (m) | facing within 30° at the end | data term at the end, median | the fit's data term, median | the truth's data term, median |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "\n| cell | captures probed | start pose | starts (offset, turn) | ended within 15 cm and 30° | diverged | root error at the end, median (m) | facing within 30° at the end | data term at the end, median | the fit's data term, median | the truth's data term, median | per-vertex at the end, median (m) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in Cell::ALL {
         let ds: Vec<&Diagnosis> = of_cell(r, c)
@@ -178,8 +178,9 @@ pub fn basin_table(r: &Report) -> String {
                 })
                 .count();
             let data: Vec<f64> = starts.iter().filter_map(|b| b.data_loss).collect();
+            let vertex: Vec<f64> = starts.iter().filter_map(|b| b.vertex_error_m).collect();
             s.push_str(&format!(
-                "| {c} | {} | {pose} | {n} (±{:.2} m, ±{:.0}°) | {closed} of {n} | {diverged} | {} | {facing} of {n} | {} | {} | {} |\n",
+                "| {c} | {} | {pose} | {n} (±{:.2} m, ±{:.0}°) | {closed} of {n} | {diverged} | {} | {facing} of {n} | {} | {} | {} | {} |\n",
                 ds.len(),
                 first.offset_m.abs(),
                 first.turn_deg.abs(),
@@ -187,6 +188,7 @@ pub fn basin_table(r: &Report) -> String {
                 median(&data),
                 median(&fit),
                 median(&truth),
+                median(&vertex),
             ));
         }
     }

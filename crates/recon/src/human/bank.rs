@@ -116,6 +116,18 @@ impl HumanProblem<'_> {
         Ok(poses)
     }
 
+    /// The prior's encoding of the source pose ([`Self::source_poses`]) nearest `rotvecs` in
+    /// joint-rotation space: the best start a retrieval over the poses the prior was trained
+    /// on could give (the basin probe's `nearest-bank` oracle).
+    pub fn nearest_source_latent(&self, rotvecs: &[[f64; 3]]) -> Result<Vec<f64>, ReconError> {
+        let poses = self.source_poses()?;
+        let nearest = poses
+            .iter()
+            .min_by(|a, b| pose_distance2(a, rotvecs).total_cmp(&pose_distance2(b, rotvecs)))
+            .ok_or_else(|| ReconError::Config("no source poses".into()))?;
+        Ok(self.prior.encode(nearest)?)
+    }
+
     /// `n` poses spread over the prior's training poses (module docs), deterministic.
     pub(super) fn pose_bank(&self, n: usize, height: f64) -> Result<Vec<PoseMode>, ReconError> {
         let poses = self.source_poses()?;
@@ -155,6 +167,9 @@ impl HumanProblem<'_> {
         }
         let t0 = std::time::Instant::now();
         let bank = self.pose_bank(s.pose_bank, cfg.height_prior[0])?;
+        if s.bank_rounds > 0 {
+            return self.bank_halving(survivors, &bank, cfg, seed);
+        }
         let thermal = self.radiometric(cfg).is_some();
         let sample = self.stratified_batch(s.score_rays, seed, thermal);
         let batch = sample.batch(s.round_sigma_m2[1]);
@@ -213,6 +228,49 @@ impl HumanProblem<'_> {
             "pose bank: {} poses × {n_tried} survivors, {} swapped, {:.2} s",
             bank.len(),
             swapped.iter().filter(|&&b| b).count(),
+            t0.elapsed().as_secs_f64()
+        );
+        Ok(out)
+    }
+}
+
+impl HumanProblem<'_> {
+    /// [`HumanProblem::bank_swap`] by successive halving (`bank_rounds` > 0): each tried
+    /// survivor and its bank poses go through the search's halving, screened to
+    /// `bank_keep << bank_rounds`; the best at the end takes the survivor's place.
+    fn bank_halving(
+        &self,
+        survivors: Vec<HumanState>,
+        bank: &[PoseMode],
+        cfg: &HumanConfig,
+        seed: u64,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        let s = &cfg.search;
+        let t0 = std::time::Instant::now();
+        let n_tried = match s.bank_survivors {
+            0 => survivors.len(),
+            n => n.min(survivors.len()),
+        };
+        let halving = HumanConfig {
+            search: super::search::SearchConfig {
+                keep_scored: s.bank_keep.max(1) << s.bank_rounds,
+                rounds: s.bank_rounds,
+                ..s.clone()
+            },
+            ..cfg.clone()
+        };
+        let mut out = survivors;
+        for (i, st) in out.iter_mut().take(n_tried).enumerate() {
+            let mut tried: Vec<HumanState> = vec![st.clone()];
+            tried.extend(bank.iter().map(|m| self.in_mode(st, m)));
+            let run_seed = seed.wrapping_mul(7919).wrapping_add(60_000 + i as u64);
+            if let Some(best) = self.halve(tried, &halving, run_seed)?.into_iter().next() {
+                *st = best;
+            }
+        }
+        tracing::debug!(
+            "pose bank by halving: {} poses × {n_tried} survivors, {:.2} s",
+            bank.len(),
             t0.elapsed().as_secs_f64()
         );
         Ok(out)
