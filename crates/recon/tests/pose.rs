@@ -100,24 +100,20 @@ fn the_nearest_source_pose_of_a_held_pose_is_itself() {
     with_posed(true, &kick(), |problem, _, _| {
         let kick = kick();
         let want = prior().encode(&kick).unwrap();
-        let got = problem.nearest_source_latent(&kick).unwrap();
-        let worst = want
-            .iter()
-            .zip(&got)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let apart = |a: &[f64], b: &[f64]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max)
+        };
+        let worst = apart(&problem.nearest_source_latent(&kick).unwrap(), &want);
         assert!(worst < 1e-9, "latent off by {worst:e}");
         let generator = irmirror_body::prior::generator::PoseGenerator::new(model());
         let stand = generator
             .template("stand", &mut irmirror_geom::rng::seeded(0, 1))
             .unwrap();
-        let other = problem.nearest_source_latent(&stand).unwrap();
-        let apart = other
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        assert!(apart > 0.1, "stand's nearest pose is the kick ({apart:e})");
+        let other = apart(&problem.nearest_source_latent(&stand).unwrap(), &want);
+        assert!(other > 0.1, "stand's nearest pose is the kick ({other:e})");
     });
 }
 

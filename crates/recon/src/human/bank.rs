@@ -167,16 +167,16 @@ impl HumanProblem<'_> {
         }
         let t0 = std::time::Instant::now();
         let bank = self.pose_bank(s.pose_bank, cfg.height_prior[0])?;
-        if s.bank_rounds > 0 {
-            return self.bank_halving(survivors, &bank, cfg, seed);
-        }
-        let thermal = self.radiometric(cfg).is_some();
-        let sample = self.stratified_batch(s.score_rays, seed, thermal);
-        let batch = sample.batch(s.round_sigma_m2[1]);
         let n_tried = match s.bank_survivors {
             0 => survivors.len(),
             n => n.min(survivors.len()),
         };
+        if s.bank_rounds > 0 {
+            return self.bank_halving(survivors, n_tried, &bank, cfg, seed);
+        }
+        let thermal = self.radiometric(cfg).is_some();
+        let sample = self.stratified_batch(s.score_rays, seed, thermal);
+        let batch = sample.batch(s.round_sigma_m2[1]);
         // Survivor i's trials are the i-th run of `bank.len()` states.
         let tried: Vec<HumanState> = survivors[..n_tried]
             .iter()
@@ -232,25 +232,20 @@ impl HumanProblem<'_> {
         );
         Ok(out)
     }
-}
 
-impl HumanProblem<'_> {
-    /// [`HumanProblem::bank_swap`] by successive halving (`bank_rounds` > 0): each tried
-    /// survivor and its bank poses go through the search's halving, screened to
-    /// `bank_keep << bank_rounds`; the best at the end takes the survivor's place.
+    /// [`HumanProblem::bank_swap`] by successive halving (`bank_rounds` > 0): each of the
+    /// first `n_tried` survivors and its bank poses go through the search's halving, screened
+    /// to `bank_keep << bank_rounds`; the best at the end takes the survivor's place.
     fn bank_halving(
         &self,
         survivors: Vec<HumanState>,
+        n_tried: usize,
         bank: &[PoseMode],
         cfg: &HumanConfig,
         seed: u64,
     ) -> Result<Vec<HumanState>, ReconError> {
         let s = &cfg.search;
         let t0 = std::time::Instant::now();
-        let n_tried = match s.bank_survivors {
-            0 => survivors.len(),
-            n => n.min(survivors.len()),
-        };
         let halving = HumanConfig {
             search: super::search::SearchConfig {
                 keep_scored: s.bank_keep.max(1) << s.bank_rounds,
