@@ -231,7 +231,9 @@ enum Command {
         /// in the pose bank's poses first, as `[human.search] pose_bank` tries the search's
         /// survivors) or `limbs` ("stand" changed part by part by the limb search first, as
         /// `[human.search] limb_survivors` does) or `nearest-bank` (the prior's training
-        /// pose nearest the true one: a perfect retrieval) or `truth-latent~S` (the encoding
+        /// pose nearest the true one: a perfect retrieval) or `retrieved` ("stand" swapped for
+        /// the pose the virtual-view retrieval gives, `[human.retrieval]`, as its `survivors`
+        /// setting does at the search's survivors) or `truth-latent~S` (the encoding
         /// with N(0, S²) noise per latent coordinate: how near a pose estimate must land).
         /// `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
@@ -357,14 +359,22 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
 }
 
 /// `--basin-poses`: a pose-generator template, `truth-latent`, `truth-latent~S`, `truth-twin`,
-/// `bank`, `limbs` or `nearest-bank`.
+/// `bank`, `limbs`, `nearest-bank` or `retrieved`.
 fn parse_basin_pose(s: &str) -> Result<String, String> {
     use irmirror_body::prior::generator::TEMPLATES;
     let s = s.trim();
     use irmirror_eval::bench::{
-        BANK, LIMBS, NEAREST_BANK, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
+        BANK, LIMBS, NEAREST_BANK, RETRIEVED, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
     };
-    if [TRUTH_LATENT, TRUTH_TWIN, BANK, LIMBS, NEAREST_BANK].contains(&s)
+    if [
+        TRUTH_LATENT,
+        TRUTH_TWIN,
+        BANK,
+        LIMBS,
+        NEAREST_BANK,
+        RETRIEVED,
+    ]
+    .contains(&s)
         || TEMPLATES.contains(&s)
         || noisy_truth_scale(s).is_some()
     {
@@ -372,7 +382,7 @@ fn parse_basin_pose(s: &str) -> Result<String, String> {
     } else {
         Err(format!(
             "{s:?}: one of {}, {TRUTH_LATENT}, {TRUTH_LATENT}~S (S ≥ 0), {TRUTH_TWIN}, {BANK}, \
-             {LIMBS}, {NEAREST_BANK}",
+             {LIMBS}, {NEAREST_BANK}, {RETRIEVED}",
             TEMPLATES.join(", "),
         ))
     }

@@ -117,6 +117,35 @@ fn the_nearest_source_pose_of_a_held_pose_is_itself() {
     });
 }
 
+/// The virtual-view retrieval (`irmirror_recon::human::retrieve`) finds a pose the source
+/// poses hold: the car's person in a kick, at the true root and facing, is retrieved nearer the
+/// kick — it retrieves the kick itself (mean joint angle, per-vertex distance) — from the
+/// "stand" it starts in; the candidates
+/// come sorted, and the first one's body scored alone scores as it did among them.
+#[test]
+fn the_retrieval_finds_a_held_pose() {
+    use irmirror_recon::human::*;
+    with_posed(true, &kick(), |problem, start, angle| {
+        let cfg = RetrievalConfig::default();
+        let end = problem.retrieved_start(start, &cfg).unwrap();
+        let (before, after) = (angle(start), angle(&end));
+        eprintln!(
+            "joint angle {:.1}° → {:.1}°, per vertex {:.3} → {:.3} m",
+            before.0, after.0, before.1, after.1
+        );
+        // Measured: 17.2° → 0.0°, 0.367 → 0.000 m (the kick itself).
+        assert!(after.0 < 1.0 && after.1 < 0.01, "{before:?} → {after:?}");
+        let cands = problem.retrieval_candidates(start, &cfg).unwrap();
+        assert!(cands.len() > 700, "{} candidates", cands.len());
+        assert!(cands.windows(2).all(|w| w[0].1 <= w[1].1), "not sorted");
+        let first = posed_body(model(), prior(), &end).unwrap();
+        let own = problem
+            .retrieval_score_at(&end.translation, &first.vertices, &cfg)
+            .unwrap();
+        assert!((own - cands[0].1).abs() < 1e-12, "{own} vs {}", cands[0].1);
+    });
+}
+
 /// The limb search finds a pose no source pose holds: the kick's legs, a wave's arms, a turned
 /// head — parts of three poses. From "stand" at the true root and facing it comes back nearer
 /// the true body (mean per-vertex distance) and lower on all rays than "stand" and than the

@@ -162,6 +162,12 @@ pub const LIMBS: &str = "limbs";
 /// start from.
 pub const NEAREST_BANK: &str = "nearest-bank";
 
+/// A basin start in the pose the virtual-view retrieval gives at the start's root and facing
+/// (`HumanProblem::retrieved_start` with `[human.retrieval]`: the source pose whose outline
+/// matches best with a tolerance, not by the data term, or the mean of the best `mean_of`),
+/// from the search's "stand" pose.
+pub const RETRIEVED: &str = "retrieved";
+
 /// `truth-latent~S`: the [`TRUTH_LATENT`] start with independent N(0, S²) noise on every
 /// latent coordinate (the prior's latent is N(0, 1)): how close a pose estimate must land for
 /// the refinement to reach the true pose's quality. `None`: not such a name.
@@ -205,6 +211,10 @@ pub struct BasinStart {
     /// Mean per-vertex distance from the true mesh at the end, m.
     #[serde(default)]
     pub vertex_error_m: Option<f64>,
+    /// Mean per-vertex distance from the true mesh at the start (after any bank, limb or
+    /// retrieval step), m.
+    #[serde(default)]
+    pub start_vertex_error_m: Option<f64>,
 }
 
 /// The basin probe's pose before it could be chosen.
@@ -532,7 +542,7 @@ fn probe_basin(
                 if name == NEAREST_BANK {
                     return Ok(problem.nearest_source_latent(true_pose)?);
                 }
-                let name = if name == BANK || name == LIMBS {
+                let name = if name == BANK || name == LIMBS || name == RETRIEVED {
                     "stand"
                 } else {
                     name
@@ -587,6 +597,13 @@ fn probe_basin(
                         .limb_swap(vec![start], &scfg, seed.wrapping_add(k as u64))?
                         .remove(0);
                 }
+                if pose == RETRIEVED {
+                    start = problem.retrieved_start(&start, &hcfg.retrieval)?;
+                }
+                let start_vertex_error_m = vertex_error(
+                    &posed_body(priors.model, priors.prior, &start)?.vertices,
+                    true_vertices,
+                );
                 let end = refine_as_fit(problem, &start, &hcfg, edge, seed.wrapping_add(k as u64))?;
                 let Some(end) = end else {
                     return Ok(BasinStart {
@@ -597,6 +614,7 @@ fn probe_basin(
                         facing_error_deg: None,
                         data_loss: None,
                         vertex_error_m: None,
+                        start_vertex_error_m,
                     });
                 };
                 Ok(BasinStart {
@@ -610,6 +628,7 @@ fn probe_basin(
                         &posed_body(priors.model, priors.prior, &end)?.vertices,
                         true_vertices,
                     ),
+                    start_vertex_error_m,
                 })
             })
             .collect()

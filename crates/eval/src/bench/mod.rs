@@ -12,8 +12,8 @@ mod run;
 mod table;
 
 pub use diagnosis::{
-    BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, LIMBS, NEAREST_BANK, SUCCESS_FACING_DEG,
-    SUCCESS_ROOT_M, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
+    BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, LIMBS, NEAREST_BANK, RETRIEVED,
+    SUCCESS_FACING_DEG, SUCCESS_ROOT_M, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
 };
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
@@ -343,6 +343,7 @@ mod tests {
                     facing_error_deg: Some(10.0),
                     data_loss: Some(0.2),
                     vertex_error_m: Some(0.15),
+                    start_vertex_error_m: Some(0.3),
                 },
                 BasinStart {
                     pose: "stand".into(),
@@ -352,6 +353,7 @@ mod tests {
                     facing_error_deg: None,
                     data_loss: None,
                     vertex_error_m: None,
+                    start_vertex_error_m: None,
                 },
             ],
         }

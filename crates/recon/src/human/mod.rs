@@ -51,6 +51,7 @@ mod observe;
 mod problem;
 pub mod radiometric;
 mod refine;
+mod retrieve;
 mod scratch;
 pub mod search;
 
@@ -60,6 +61,7 @@ pub use scratch::Scratch;
 
 pub use observe::{Rise, Selection};
 pub use refine::Stratified;
+pub use retrieve::RetrievalConfig;
 pub use search::{SearchConfig, fit_human, flipped};
 
 use crate::ReconError;
@@ -156,6 +158,8 @@ pub struct HumanConfig {
     pub init_distance_m: [f64; 2],
     /// The global search before refinement.
     pub search: SearchConfig,
+    /// The virtual-view pose retrieval at the search's survivors ([`retrieve`]).
+    pub retrieval: RetrievalConfig,
     /// Distinct hypotheses reported.
     pub top_k: usize,
     /// How the body's triangles form a ray's occupancy (`irmirror_render::occupancy` docs).
@@ -167,7 +171,7 @@ pub struct HumanConfig {
 impl HumanConfig {
     /// Refuses settings no fit can run with (a `--config` TOML is user input): a learning
     /// rate, the active set's margin or the polish's rate share negative or not finite, a
-    /// blur not positive.
+    /// blur not positive, a retrieval raster that is not a raster.
     pub fn check(&self) -> Result<(), crate::ReconError> {
         let at_least_zero = [
             ("lr_translation", self.lr_translation),
@@ -196,7 +200,7 @@ impl HumanConfig {
                 "[human] sigma_m2 holds {v}: the blur must be a finite number > 0 (m²)"
             )));
         }
-        Ok(())
+        self.retrieval.check()
     }
 
     /// The same settings with every learning rate scaled by `k`.
@@ -259,6 +263,7 @@ impl Default for HumanConfig {
             build: Phenotype::default(),
             init_distance_m: [0.7, 8.0],
             search: SearchConfig::default(),
+            retrieval: RetrievalConfig::default(),
             top_k: 3,
             aggregation: Aggregation::Silhouette,
             radiometric: radiometric::RadiometricConfig::default(),

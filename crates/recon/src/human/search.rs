@@ -434,6 +434,7 @@ impl HumanProblem<'_> {
             .collect();
         let survivors = self.bank_swap(survivors, cfg, seed)?;
         let survivors = self.limb_swap(survivors, cfg, seed)?;
+        let survivors = self.retrieval_swap(survivors, &cfg.retrieval)?;
         let mut out = Vec::with_capacity(cfg.inits);
         for st in survivors {
             if flips && out.len() + 1 < cfg.inits.max(2) {

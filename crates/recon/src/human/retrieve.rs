@@ -1,0 +1,544 @@
+//! Pose retrieval in the reflection's virtual view.
+//!
+//! Ranking the pose bank by the data term (one forward pass at the survivor's root) does not
+//! find the training pose nearest the person's: held-out bowls at the exact true root and
+//! facing, a start in that pose ends at 0.14 m per vertex, the data term's best of every
+//! source pose at 0.20 m (README, "Twenty-second run"). The data term is sharp: a pose whose
+//! outline is right but sits a few centimetres off scores like a wrong one. Retrieval compares
+//! outlines with a tolerance instead. Each object's reflected rays are cut with the plane
+//! through the state's root facing that object — the person as the object sees them, a
+//! virtual view, whatever the mirror's curvature — and each candidate body is projected from
+//! the object's centre onto the same plane and rasterised. A candidate is scored by a
+//! truncated chamfer distance: each mask ray's distance to the silhouette plus each other
+//! ray's distance to the silhouette's outside, per mask ray, at the best of a few small
+//! shifts in the plane.
+
+use super::bank::PoseMode;
+use super::{HumanProblem, HumanState};
+use crate::ReconError;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Retrieval's raster and tolerance (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RetrievalConfig {
+    /// Raster cell in the plane, m.
+    pub cell_m: f64,
+    /// Half the raster's width and height about the root, m.
+    pub half_width_m: f64,
+    /// Shifts tried in the plane: ± this, m, in steps of `shift_step_m`.
+    pub shift_m: f64,
+    /// The shifts' step, m (rounded to whole cells).
+    pub shift_step_m: f64,
+    /// A ray's distance counts up to this, m.
+    pub truncate_m: f64,
+    /// Each survivor of the search takes the pose retrieved at its root and facing
+    /// ([`HumanProblem::retrieval_swap`]; its front/back partner is that state turned) before
+    /// the refinement. Off: on 24 held-out bowls with `mean_of = 30` root median 0.148 →
+    /// 0.092 m but per-vertex +0.049 ± 0.055 m (paired), successes 10 → 9; retrieving the
+    /// partners' poses too, +0.071 ± 0.059 m, successes 7 (README, "Twenty-third run").
+    pub survivors: bool,
+    /// The most rays outside the mask scored per object (evenly strided).
+    pub max_empty_rays: usize,
+    /// The start [`HumanProblem::retrieved_start`] gives: the mean of the best `mean_of`
+    /// candidates' latents and roots (1: the best alone). Where many poses explain the
+    /// outline about equally well, their mean is nearer the person than any one of them.
+    pub mean_of: usize,
+}
+
+impl Default for RetrievalConfig {
+    fn default() -> Self {
+        Self {
+            cell_m: 0.02,
+            half_width_m: 1.3,
+            shift_m: 0.08,
+            shift_step_m: 0.04,
+            truncate_m: 0.15,
+            survivors: false,
+            max_empty_rays: 3000,
+            mean_of: 1,
+        }
+    }
+}
+
+impl RetrievalConfig {
+    /// Refuses a raster no retrieval can use: a length not a finite number > 0 (the shift's
+    /// range ≥ 0), or more than 1,000 cells a side.
+    pub fn check(&self) -> Result<(), ReconError> {
+        let lengths = [
+            ("cell_m", self.cell_m),
+            ("half_width_m", self.half_width_m),
+            ("shift_step_m", self.shift_step_m),
+            ("truncate_m", self.truncate_m),
+        ];
+        for (name, v) in lengths {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ReconError::Config(format!(
+                    "[human.retrieval] {name} = {v}: must be a finite number > 0 (m)"
+                )));
+            }
+        }
+        if !(self.shift_m.is_finite() && self.shift_m >= 0.0) {
+            return Err(ReconError::Config(format!(
+                "[human.retrieval] shift_m = {}: must be a finite number ≥ 0 (m)",
+                self.shift_m
+            )));
+        }
+        if side(self) > 1000 {
+            return Err(ReconError::Config(format!(
+                "[human.retrieval] {} cells a side (2 × half_width_m / cell_m): at most 1000",
+                side(self)
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// One object's virtual view of the plane through the root (module docs).
+struct View {
+    centre: Vector3<f64>,
+    axis: Vector3<f64>,
+    e_u: Vector3<f64>,
+    e_v: Vector3<f64>,
+    root: Vector3<f64>,
+    /// Raster cells of the mask rays' plane points.
+    mask: Vec<(i32, i32)>,
+    /// Raster cells of the other rays' plane points.
+    empty: Vec<(i32, i32)>,
+}
+
+impl View {
+    /// `p`'s raster cell in the plane, projected from the centre (`None`: behind the centre).
+    fn project(&self, p: &Vector3<f64>, cfg: &RetrievalConfig) -> Option<(f64, f64)> {
+        let along = (p - self.centre).dot(&self.axis);
+        if along < 1e-3 {
+            return None;
+        }
+        let s = (self.root - self.centre).dot(&self.axis) / along;
+        let q = self.centre + (p - self.centre) * s - self.root;
+        Some((
+            (q.dot(&self.e_u) + cfg.half_width_m) / cfg.cell_m,
+            (q.dot(&self.e_v) + cfg.half_width_m) / cfg.cell_m,
+        ))
+    }
+}
+
+/// Cells per side of the raster.
+fn side(cfg: &RetrievalConfig) -> usize {
+    (2.0 * cfg.half_width_m / cfg.cell_m).ceil() as usize
+}
+
+/// Squared Euclidean distance transform of one line (Felzenszwalb & Huttenlocher).
+fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let n = f.len();
+    let mut k = 0;
+    v[0] = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in 1..n {
+        loop {
+            let p = v[k];
+            let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
+            if s <= z[k] && k > 0 {
+                k -= 1;
+            } else {
+                k += 1;
+                v[k] = q;
+                z[k] = s;
+                z[k + 1] = f64::INFINITY;
+                break;
+            }
+        }
+    }
+    k = 0;
+    for (q, out) in d.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        *out = (q as f64 - p as f64).powi(2) + f[p];
+    }
+}
+
+/// Distance (cells) from every cell of an `n`×`n` raster to the nearest cell where `seed` is
+/// true (large where there is none).
+fn distance_to(seed: &[bool], n: usize) -> Vec<f64> {
+    const FAR: f64 = 1e12;
+    let mut g: Vec<f64> = seed.iter().map(|&s| if s { 0.0 } else { FAR }).collect();
+    let (mut d, mut v, mut z) = (vec![0.0; n], vec![0; n], vec![0.0; n + 1]);
+    let mut line = vec![0.0; n];
+    for row in 0..n {
+        line.copy_from_slice(&g[row * n..(row + 1) * n]);
+        edt_1d(&line, &mut d, &mut v, &mut z);
+        g[row * n..(row + 1) * n].copy_from_slice(&d);
+    }
+    for col in 0..n {
+        for (r, l) in line.iter_mut().enumerate() {
+            *l = g[r * n + col];
+        }
+        edt_1d(&line, &mut d, &mut v, &mut z);
+        for (r, x) in d.iter().enumerate() {
+            g[r * n + col] = x.sqrt();
+        }
+    }
+    g
+}
+
+impl HumanProblem<'_> {
+    /// Each object's virtual view of the plane through `root` (module docs); objects with no
+    /// mask ray in the raster are left out.
+    fn views(&self, root: &Vector3<f64>, cfg: &RetrievalConfig) -> Vec<View> {
+        let up = self.up.normalize();
+        let objects = self.rays.object.iter().copied().max().map_or(0, |m| m + 1);
+        let n = side(cfg) as i32;
+        (0..objects)
+            .filter_map(|k| {
+                let rays: Vec<usize> = (0..self.rays.len())
+                    .filter(|&i| self.rays.object[i] == k)
+                    .collect();
+                if rays.is_empty() {
+                    return None;
+                }
+                let centre = rays
+                    .iter()
+                    .map(|&i| self.rays.origin[i])
+                    .sum::<Vector3<f64>>()
+                    / rays.len() as f64;
+                let axis = (root - centre).try_normalize(1e-9)?;
+                let e_v = (up - axis * axis.dot(&up)).try_normalize(1e-9)?;
+                let e_u = e_v.cross(&axis);
+                let mut view = View {
+                    centre,
+                    axis,
+                    e_u,
+                    e_v,
+                    root: *root,
+                    mask: Vec::new(),
+                    empty: Vec::new(),
+                };
+                let mut empty = Vec::new();
+                for &i in &rays {
+                    let (o, d) = (self.rays.origin[i], self.rays.dir[i]);
+                    let den = d.dot(&axis);
+                    if den < 0.1 {
+                        continue;
+                    }
+                    let t = (root - o).dot(&axis) / den;
+                    let q = o + d * t - root;
+                    let c = (
+                        ((q.dot(&e_u) + cfg.half_width_m) / cfg.cell_m).floor() as i32,
+                        ((q.dot(&e_v) + cfg.half_width_m) / cfg.cell_m).floor() as i32,
+                    );
+                    if c.0 < 0 || c.1 < 0 || c.0 >= n || c.1 >= n {
+                        continue;
+                    }
+                    if self.mask.data[self.rays.pixel[i] as usize] {
+                        view.mask.push(c);
+                    } else {
+                        empty.push(c);
+                    }
+                }
+                let stride = empty.len().div_ceil(cfg.max_empty_rays.max(1)).max(1);
+                view.empty = empty.into_iter().step_by(stride).collect();
+                (!view.mask.is_empty()).then_some(view)
+            })
+            .collect()
+    }
+
+    /// The silhouette of `vertices` in `view`'s raster: every cell whose centre a projected
+    /// triangle covers.
+    fn silhouette(
+        &self,
+        vertices: &[Vector3<f64>],
+        view: &View,
+        cfg: &RetrievalConfig,
+    ) -> Vec<bool> {
+        let n = side(cfg);
+        let mut sil = vec![false; n * n];
+        let projected: Vec<Option<(f64, f64)>> =
+            vertices.iter().map(|v| view.project(v, cfg)).collect();
+        for f in &self.model.asset.faces {
+            let [Some(a), Some(b), Some(c)] = f.map(|i| projected[i as usize]) else {
+                continue;
+            };
+            let lo = |x: f64, y: f64, z: f64| (x.min(y).min(z) - 0.5).ceil().max(0.0) as usize;
+            let hi =
+                |x: f64, y: f64, z: f64| ((x.max(y).max(z) - 0.5).floor() as i64).min(n as i64 - 1);
+            let (x0, x1) = (lo(a.0, b.0, c.0), hi(a.0, b.0, c.0));
+            let (y0, y1) = (lo(a.1, b.1, c.1), hi(a.1, b.1, c.1));
+            if x1 < 0 || y1 < 0 {
+                continue;
+            }
+            let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
+                ((q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)) * area.signum()
+            };
+            for y in y0..=y1 as usize {
+                for x in x0..=x1 as usize {
+                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                    if edge(a, b, px, py) >= 0.0
+                        && edge(b, c, px, py) >= 0.0
+                        && edge(c, a, px, py) >= 0.0
+                    {
+                        sil[y * n + x] = true;
+                    }
+                }
+            }
+        }
+        sil
+    }
+
+    /// The retrieval score of body `vertices` (depth frame) in `views` (module docs): per view,
+    /// the truncated chamfer per mask ray at its best shift, summed over the views; lower is
+    /// better.
+    fn retrieval_score(
+        &self,
+        vertices: &[Vector3<f64>],
+        views: &[View],
+        cfg: &RetrievalConfig,
+    ) -> f64 {
+        let n = side(cfg);
+        let step = ((cfg.shift_step_m / cfg.cell_m).round() as i32).max(1);
+        let reach = (cfg.shift_m / cfg.cell_m / f64::from(step)).round() as i32;
+        let cap = cfg.truncate_m / cfg.cell_m;
+        views
+            .iter()
+            .map(|view| {
+                let sil = self.silhouette(vertices, view, cfg);
+                let to_sil = distance_to(&sil, n);
+                let outside: Vec<bool> = sil.iter().map(|s| !s).collect();
+                let to_out = distance_to(&outside, n);
+                let at = |d: &[f64], (x, y): (i32, i32)| {
+                    if x < 0 || y < 0 || x >= n as i32 || y >= n as i32 {
+                        // Off the raster: no body there.
+                        return None;
+                    }
+                    Some(d[y as usize * n + x as usize].min(cap))
+                };
+                let mut best = f64::INFINITY;
+                for du in (-reach..=reach).map(|k| k * step) {
+                    for dv in (-reach..=reach).map(|k| k * step) {
+                        let miss: f64 = view
+                            .mask
+                            .iter()
+                            .map(|&(x, y)| at(&to_sil, (x + du, y + dv)).unwrap_or(cap))
+                            .sum();
+                        let spill: f64 = view
+                            .empty
+                            .iter()
+                            .map(|&(x, y)| at(&to_out, (x + du, y + dv)).unwrap_or(0.0))
+                            .sum();
+                        best = best.min(miss + spill);
+                    }
+                }
+                best * cfg.cell_m / view.mask.len() as f64
+            })
+            .sum()
+    }
+
+    /// `st` tried in every pose of `bank` (its root and facing kept, the feet moved to the
+    /// floor when known: [`Self::in_mode`]), ranked by the retrieval score (module docs): the
+    /// bank's indices, best first, with their scores.
+    pub(super) fn retrieve(
+        &self,
+        st: &HumanState,
+        bank: &[PoseMode],
+        cfg: &RetrievalConfig,
+    ) -> Result<Vec<(usize, f64)>, ReconError> {
+        let views = self.views(&st.translation, cfg);
+        if views.is_empty() {
+            return Ok(Vec::new());
+        }
+        let shaped = super::shaped_body(self.model, &st.build, st.height)?;
+        let mut scored: Vec<(usize, f64)> = bank
+            .par_iter()
+            .enumerate()
+            .map(|(i, mode)| {
+                let tried = self.in_mode(st, mode);
+                let body = self.model.pose(
+                    &shaped,
+                    &irmirror_body::Pose {
+                        rotations: super::joint_rotations(self.prior, &tried)?,
+                        translation: tried.translation,
+                    },
+                )?;
+                Ok((i, self.retrieval_score(&body.vertices, &views, cfg)))
+            })
+            .collect::<Result<_, ReconError>>()?;
+        scored.sort_by(|a, b| a.1.total_cmp(&b.1));
+        Ok(scored)
+    }
+
+    /// The retrieval score of any body `vertices` (depth frame) in the views through `root`
+    /// (`None`: no view sees the mask).
+    pub fn retrieval_score_at(
+        &self,
+        root: &Vector3<f64>,
+        vertices: &[Vector3<f64>],
+        cfg: &RetrievalConfig,
+    ) -> Option<f64> {
+        let views = self.views(root, cfg);
+        (!views.is_empty()).then(|| self.retrieval_score(vertices, &views, cfg))
+    }
+
+    /// The prior's source poses ([`Self::source_poses`]) as modes of the body at height
+    /// slider `height`.
+    fn source_modes(&self, height: f64) -> Result<Vec<PoseMode>, ReconError> {
+        let poses = self.source_poses()?;
+        let shaped = super::shaped_body(self.model, &self.build, height)?;
+        poses
+            .par_iter()
+            .map(|p| self.pose_mode(p, &shaped))
+            .collect()
+    }
+
+    /// `st` in every source pose ([`Self::source_poses`], its feet on the floor when known),
+    /// with its retrieval score, best first; empty when no view sees the mask.
+    pub fn retrieval_candidates(
+        &self,
+        st: &HumanState,
+        cfg: &RetrievalConfig,
+    ) -> Result<Vec<(HumanState, f64)>, ReconError> {
+        let bank = self.source_modes(st.height)?;
+        Ok(self
+            .retrieve(st, &bank, cfg)?
+            .into_iter()
+            .map(|(i, score)| (self.in_mode(st, &bank[i]), score))
+            .collect())
+    }
+
+    /// `st` in the pose the retrieval ranks first among the prior's source poses, or the mean
+    /// of the best `mean_of` (latents and roots); `st` when nothing is seen.
+    pub fn retrieved_start(
+        &self,
+        st: &HumanState,
+        cfg: &RetrievalConfig,
+    ) -> Result<HumanState, ReconError> {
+        let cands = self.retrieval_candidates(st, cfg)?;
+        Ok(mean_state(st, &cands, cfg.mean_of))
+    }
+
+    /// Each survivor in its retrieved pose ([`Self::retrieved_start`]) when `survivors` is on.
+    pub fn retrieval_swap(
+        &self,
+        survivors: Vec<HumanState>,
+        cfg: &RetrievalConfig,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        let Some(first) = survivors.first().filter(|_| cfg.survivors) else {
+            return Ok(survivors);
+        };
+        let t0 = std::time::Instant::now();
+        let bank = self.source_modes(first.height)?;
+        let out = survivors
+            .iter()
+            .map(|st| {
+                let cands: Vec<(HumanState, f64)> = self
+                    .retrieve(st, &bank, cfg)?
+                    .into_iter()
+                    .take(cfg.mean_of.max(1))
+                    .map(|(i, score)| (self.in_mode(st, &bank[i]), score))
+                    .collect();
+                Ok(mean_state(st, &cands, cfg.mean_of))
+            })
+            .collect::<Result<_, ReconError>>()?;
+        tracing::debug!(
+            "pose retrieval: {} survivors, {:.2} s",
+            survivors.len(),
+            t0.elapsed().as_secs_f64()
+        );
+        Ok(out)
+    }
+}
+
+/// The mean of the best `mean_of` of `cands` (sorted, best first): latents and roots; `st`
+/// when there are none.
+fn mean_state(st: &HumanState, cands: &[(HumanState, f64)], mean_of: usize) -> HumanState {
+    let best = &cands[..mean_of.max(1).min(cands.len())];
+    let Some((first, _)) = best.first() else {
+        return st.clone();
+    };
+    let k = best.len() as f64;
+    let mut out = first.clone();
+    out.translation = best
+        .iter()
+        .map(|(s, _)| s.translation)
+        .sum::<Vector3<f64>>()
+        / k;
+    for (j, z) in out.latent.iter_mut().enumerate() {
+        *z = best.iter().map(|(s, _)| s.latent[j]).sum::<f64>() / k;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The transform's distances are the brute-force Euclidean ones.
+    /// A raster that is not one is refused with the field's name.
+    #[test]
+    fn a_bad_raster_is_refused() {
+        assert!(RetrievalConfig::default().check().is_ok());
+        for (cfg, field) in [
+            (
+                RetrievalConfig {
+                    cell_m: 0.0,
+                    ..Default::default()
+                },
+                "cell_m",
+            ),
+            (
+                RetrievalConfig {
+                    truncate_m: f64::NAN,
+                    ..Default::default()
+                },
+                "truncate_m",
+            ),
+            (
+                RetrievalConfig {
+                    shift_m: -1.0,
+                    ..Default::default()
+                },
+                "shift_m",
+            ),
+            (
+                RetrievalConfig {
+                    cell_m: 1e-4,
+                    ..Default::default()
+                },
+                "cells a side",
+            ),
+        ] {
+            let e = cfg.check().unwrap_err().to_string();
+            assert!(e.contains(field), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_distance_transform_is_euclidean() {
+        let n = 9;
+        let mut seed = vec![false; n * n];
+        for &(x, y) in &[(1usize, 1usize), (7, 2), (4, 8)] {
+            seed[y * n + x] = true;
+        }
+        let d = distance_to(&seed, n);
+        for y in 0..n {
+            for x in 0..n {
+                let want = [(1.0f64, 1.0f64), (7.0, 2.0), (4.0, 8.0)]
+                    .iter()
+                    .map(|&(a, b)| ((x as f64 - a).powi(2) + (y as f64 - b).powi(2)).sqrt())
+                    .fold(f64::INFINITY, f64::min);
+                assert!(
+                    (d[y * n + x] - want).abs() < 1e-9,
+                    "{x},{y}: {} vs {want}",
+                    d[y * n + x]
+                );
+            }
+        }
+    }
+}
