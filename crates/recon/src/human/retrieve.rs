@@ -12,6 +12,11 @@
 //! truncated chamfer distance: each mask ray's distance to the silhouette plus each other
 //! ray's distance to the silhouette's outside, per mask ray, at the best of a few small
 //! shifts in the plane.
+//!
+//! Measured (8 held-out bowls at the exact true root and facing, README "Twenty-third run"):
+//! the first pick ends the refinement at 0.27 m per vertex, the mean of the best 30 at 0.19 m
+//! ("stand" 0.30, the nearest source pose 0.16). It finds a better pose at a known facing,
+//! not the facing: at the search's survivors it is off.
 
 use super::bank::PoseMode;
 use super::{HumanProblem, HumanState};
