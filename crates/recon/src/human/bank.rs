@@ -128,7 +128,8 @@ impl HumanProblem<'_> {
         Ok(self.prior.encode(nearest)?)
     }
 
-    /// `n` poses spread over the prior's training poses (module docs), deterministic.
+    /// `n` poses spread over the prior's training poses (module docs; `usize::MAX`: all of
+    /// them), deterministic.
     pub(super) fn pose_bank(&self, n: usize, height: f64) -> Result<Vec<PoseMode>, ReconError> {
         let poses = self.source_poses()?;
         let shaped = super::shaped_body(self.model, &self.build, height)?;

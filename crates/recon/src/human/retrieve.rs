@@ -391,17 +391,6 @@ impl HumanProblem<'_> {
         (!views.is_empty()).then(|| self.retrieval_score(vertices, &views, cfg))
     }
 
-    /// The prior's source poses ([`Self::source_poses`]) as modes of the body at height
-    /// slider `height`.
-    fn source_modes(&self, height: f64) -> Result<Vec<PoseMode>, ReconError> {
-        let poses = self.source_poses()?;
-        let shaped = super::shaped_body(self.model, &self.build, height)?;
-        poses
-            .par_iter()
-            .map(|p| self.pose_mode(p, &shaped))
-            .collect()
-    }
-
     /// `st` in every source pose ([`Self::source_poses`], its feet on the floor when known),
     /// with its retrieval score, best first; empty when no view sees the mask.
     pub fn retrieval_candidates(
@@ -409,9 +398,19 @@ impl HumanProblem<'_> {
         st: &HumanState,
         cfg: &RetrievalConfig,
     ) -> Result<Vec<(HumanState, f64)>, ReconError> {
-        let bank = self.source_modes(st.height)?;
+        let bank = self.pose_bank(usize::MAX, st.height)?;
+        self.candidates_in(st, &bank, cfg)
+    }
+
+    /// [`Self::retrieval_candidates`] among the poses of `bank`.
+    fn candidates_in(
+        &self,
+        st: &HumanState,
+        bank: &[PoseMode],
+        cfg: &RetrievalConfig,
+    ) -> Result<Vec<(HumanState, f64)>, ReconError> {
         Ok(self
-            .retrieve(st, &bank, cfg)?
+            .retrieve(st, bank, cfg)?
             .into_iter()
             .map(|(i, score)| (self.in_mode(st, &bank[i]), score))
             .collect())
@@ -438,17 +437,15 @@ impl HumanProblem<'_> {
             return Ok(survivors);
         };
         let t0 = std::time::Instant::now();
-        let bank = self.source_modes(first.height)?;
+        let bank = self.pose_bank(usize::MAX, first.height)?;
         let out = survivors
             .iter()
             .map(|st| {
-                let cands: Vec<(HumanState, f64)> = self
-                    .retrieve(st, &bank, cfg)?
-                    .into_iter()
-                    .take(cfg.mean_of.max(1))
-                    .map(|(i, score)| (self.in_mode(st, &bank[i]), score))
-                    .collect();
-                Ok(mean_state(st, &cands, cfg.mean_of))
+                Ok(mean_state(
+                    st,
+                    &self.candidates_in(st, &bank, cfg)?,
+                    cfg.mean_of,
+                ))
             })
             .collect::<Result<_, ReconError>>()?;
         tracing::debug!(
