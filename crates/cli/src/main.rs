@@ -233,7 +233,8 @@ enum Command {
         /// `[human.search] limb_survivors` does) or `nearest-bank` (the prior's training
         /// pose nearest the true one: a perfect retrieval) or `retrieved` ("stand" swapped for
         /// the pose the virtual-view retrieval gives, `[human.retrieval]`, as its `survivors`
-        /// setting does at the search's survivors) or `truth-latent~S` (the encoding
+        /// setting does at the search's survivors) or `retrieved-twin` (the same from the
+        /// silhouette twin of the true root and facing) or `truth-latent~S` (the encoding
         /// with N(0, S²) noise per latent coordinate: how near a pose estimate must land).
         /// `--basin 0,0
         /// --basin-poses walk,sit,reach,truth-latent` asks: from the true root and facing,
@@ -359,12 +360,13 @@ fn parse_basin(s: &str) -> Result<irmirror_eval::bench::BasinProbe, String> {
 }
 
 /// `--basin-poses`: a pose-generator template, `truth-latent`, `truth-latent~S`, `truth-twin`,
-/// `bank`, `limbs`, `nearest-bank` or `retrieved`.
+/// `bank`, `limbs`, `nearest-bank`, `retrieved` or `retrieved-twin`.
 fn parse_basin_pose(s: &str) -> Result<String, String> {
     use irmirror_body::prior::generator::TEMPLATES;
     let s = s.trim();
     use irmirror_eval::bench::{
-        BANK, LIMBS, NEAREST_BANK, RETRIEVED, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
+        BANK, LIMBS, NEAREST_BANK, RETRIEVED, RETRIEVED_TWIN, TRUTH_LATENT, TRUTH_TWIN,
+        noisy_truth_scale,
     };
     if [
         TRUTH_LATENT,
@@ -373,6 +375,7 @@ fn parse_basin_pose(s: &str) -> Result<String, String> {
         LIMBS,
         NEAREST_BANK,
         RETRIEVED,
+        RETRIEVED_TWIN,
     ]
     .contains(&s)
         || TEMPLATES.contains(&s)
@@ -382,7 +385,7 @@ fn parse_basin_pose(s: &str) -> Result<String, String> {
     } else {
         Err(format!(
             "{s:?}: one of {}, {TRUTH_LATENT}, {TRUTH_LATENT}~S (S ≥ 0), {TRUTH_TWIN}, {BANK}, \
-             {LIMBS}, {NEAREST_BANK}, {RETRIEVED}",
+             {LIMBS}, {NEAREST_BANK}, {RETRIEVED}, {RETRIEVED_TWIN}",
             TEMPLATES.join(", "),
         ))
     }

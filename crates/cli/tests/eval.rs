@@ -237,6 +237,28 @@ fn eval_writes_table_results_and_report() {
         // (the thermal term is 0 at the noise and 1 for "nobody there", unbounded beyond).
         let truth = c["diagnosis"]["truth_loss"].as_f64().unwrap();
         assert!(truth.is_finite() && truth > -1.0, "{c}");
+        // The thermal front/back cues: the truth's outline twin and the facing judge, and each
+        // hypothesis' outline twin (four losses each).
+        let d = &c["diagnosis"];
+        assert_eq!(
+            d["truth_outline_twin_losses"].as_array().unwrap().len(),
+            2,
+            "{c}"
+        );
+        assert_eq!(
+            d["truth_thermal_facing"].as_array().unwrap().len(),
+            2,
+            "{c}"
+        );
+        let twins = d["hypothesis_outline_twin_losses"].as_array().unwrap();
+        assert_eq!(
+            twins.len(),
+            d["hypothesis_losses"].as_array().unwrap().len()
+        );
+        assert!(
+            twins.iter().all(|t| t.as_array().unwrap().len() == 4),
+            "{c}"
+        );
         let id = c["id"].as_str().unwrap();
         assert!(out.join(format!("captures/{id}/overlay.png")).is_file());
         assert!(out.join(format!("captures/{id}/third.png")).is_file());

@@ -114,6 +114,29 @@ pub struct Diagnosis {
     /// silhouette says about front and back on the same capture.
     #[serde(default)]
     pub truth_mask_losses: Option<[f64; 2]>,
+    /// The true body's outline twin ([`HumanProblem::outline_twin_mesh`]: front and back
+    /// swapped along the mirror's lines of sight, the outline kept) scored by the data term and
+    /// by the mask term: how much the thermal values alone say about front and back at the true
+    /// pose (the mask term should barely move).
+    #[serde(default)]
+    pub truth_outline_twin_losses: Option<[f64; 2]>,
+    /// Per reported hypothesis: `[data term, its outline twin's data term, mask term, its
+    /// outline twin's mask term]` — whether a fit's own pose, turned front to back with its
+    /// outline kept, explains the thermal image better.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hypothesis_outline_twin_losses: Vec<[f64; 4]>,
+    /// The thermal facing judge's residual (`HumanProblem::thermal_residual_at`) of the true
+    /// body and of its outline twin: what the virtual view's thermal raster says at the true
+    /// pose.
+    #[serde(default)]
+    pub truth_thermal_residuals: Option<[f64; 2]>,
+    /// The thermal facing judge (`HumanProblem::thermal_facing`, best 30 outlines) at our
+    /// model's truth state and at its silhouette twin.
+    #[serde(default)]
+    pub truth_thermal_facing: Option<[f64; 2]>,
+    /// The same at each reported hypothesis: `[own facing, twin's]`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hypothesis_thermal_facing: Vec<Option<[f64; 2]>>,
     /// The class.
     pub class: FailureClass,
     /// The refinement's basin (`eval --basin`): the production refinement started near the
@@ -167,6 +190,12 @@ pub const NEAREST_BANK: &str = "nearest-bank";
 /// matches best with a tolerance, not by the data term, or the mean of the best `mean_of`),
 /// from the search's "stand" pose.
 pub const RETRIEVED: &str = "retrieved";
+
+/// A [`RETRIEVED`] start from the silhouette twin of the true root and facing
+/// ([`HumanProblem::twin`] of the "stand" start there): the pose the retrieval gives a body
+/// facing the other way with the same outline. Against [`RETRIEVED`] it asks whether the data
+/// term tells front from back when both sides carry a retrieved (not the true) pose.
+pub const RETRIEVED_TWIN: &str = "retrieved-twin";
 
 /// `truth-latent~S`: the [`TRUTH_LATENT`] start with independent N(0, S²) noise on every
 /// latent coordinate (the prior's latent is N(0, 1)): how close a pose estimate must land for
@@ -295,6 +324,35 @@ pub(super) fn diagnose(
         problem.mesh_data_loss(&truth, &mask_cfg).0,
         problem.mesh_data_loss(&flipped, &mask_cfg).0,
     ]);
+    let centred = human_problem(
+        priors,
+        &rec.rays,
+        &rec.pre.mask,
+        &rec.objects,
+        &hcfg,
+        rad.as_ref(),
+    );
+    let outline_twin = |vertices: &[Vector3<f64>], root: &Vector3<f64>| {
+        let twin = centred.outline_twin_mesh(vertices, root);
+        [
+            problem.mesh_data_loss(vertices, &hcfg).0,
+            problem.mesh_data_loss(&twin, &hcfg).0,
+            problem.mesh_data_loss(vertices, &mask_cfg).0,
+            problem.mesh_data_loss(&twin, &mask_cfg).0,
+        ]
+    };
+    let truth_outline_twin_losses = {
+        let l = outline_twin(&truth, &root);
+        Some([l[1], l[3]])
+    };
+    let truth_thermal_residuals = centred
+        .thermal_residual_at(&root, &truth, &hcfg.retrieval)
+        .zip(centred.thermal_residual_at(
+            &root,
+            &centred.outline_twin_mesh(&truth, &root),
+            &hcfg.retrieval,
+        ))
+        .map(|(a, b)| [a, b]);
     let (truth_loss_true_objects, mirror) = {
         let rays = reflected_rays_through(
             &p.capture,
@@ -324,6 +382,10 @@ pub(super) fn diagnose(
         .iter()
         .map(|b| (b.joints[0] - true_root).norm())
         .collect();
+    let hypothesis_outline_twin_losses: Vec<[f64; 4]> = bodies
+        .iter()
+        .map(|b| outline_twin(&b.vertices, &b.joints[0]))
+        .collect();
     let hypothesis_facing_errors_deg: Vec<Option<f64>> = bodies
         .iter()
         .map(|b| facing_error_deg(&b.keypoints, &p.sim.body.keypoints))
@@ -334,6 +396,12 @@ pub(super) fn diagnose(
         .find(|(_, f)| f.is_some_and(|f| f <= SUCCESS_FACING_DEG))
         .and_then(|(b, _)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
     let truth_state = model_truth(p, priors, &truth, (&hcfg.build, hcfg.lr_residual > 0.0))?;
+    let truth_thermal_facing = centred.thermal_facing(&truth_state, &hcfg.retrieval, 30)?;
+    let hypothesis_thermal_facing = rec
+        .states
+        .iter()
+        .map(|st| centred.thermal_facing(st, &hcfg.retrieval, 30))
+        .collect::<Result<Vec<_>, _>>()?;
     let (truth_start_loss, truth_start_root_error_m) =
         refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
             .map_or((None, None), |(l, e)| (Some(l), Some(e)));
@@ -379,6 +447,11 @@ pub(super) fn diagnose(
         model_truth_vertex_error_m,
         truth_flip_loss,
         truth_mask_losses,
+        truth_outline_twin_losses,
+        hypothesis_outline_twin_losses,
+        truth_thermal_residuals,
+        truth_thermal_facing,
+        hypothesis_thermal_facing,
         class,
         basin,
     })
@@ -542,7 +615,7 @@ fn probe_basin(
                 if name == NEAREST_BANK {
                     return Ok(problem.nearest_source_latent(true_pose)?);
                 }
-                let name = if name == BANK || name == LIMBS || name == RETRIEVED {
+                let name = if [BANK, LIMBS, RETRIEVED, RETRIEVED_TWIN].contains(&name.as_str()) {
                     "stand"
                 } else {
                     name
@@ -578,7 +651,7 @@ fn probe_basin(
                     latent,
                     residual: Vec::new(),
                 };
-                if pose == TRUTH_TWIN {
+                if pose == TRUTH_TWIN || pose == RETRIEVED_TWIN {
                     start = problem.twin(&start)?;
                 }
                 if pose == BANK {
@@ -597,7 +670,7 @@ fn probe_basin(
                         .limb_swap(vec![start], &scfg, seed.wrapping_add(k as u64))?
                         .remove(0);
                 }
-                if pose == RETRIEVED {
+                if pose == RETRIEVED || pose == RETRIEVED_TWIN {
                     start = problem.retrieved_start(&start, &hcfg.retrieval)?;
                 }
                 let start_vertex_error_m = vertex_error(

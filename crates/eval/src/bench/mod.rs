@@ -13,7 +13,8 @@ mod table;
 
 pub use diagnosis::{
     BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, LIMBS, NEAREST_BANK, RETRIEVED,
-    SUCCESS_FACING_DEG, SUCCESS_ROOT_M, TRUTH_LATENT, TRUTH_TWIN, noisy_truth_scale,
+    RETRIEVED_TWIN, SUCCESS_FACING_DEG, SUCCESS_ROOT_M, TRUTH_LATENT, TRUTH_TWIN,
+    noisy_truth_scale,
 };
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
@@ -332,6 +333,11 @@ mod tests {
             model_truth_vertex_error_m: Some(0.15),
             truth_flip_loss: Some(0.35),
             truth_mask_losses: Some([0.2, 0.2]),
+            truth_outline_twin_losses: Some([0.3, 0.21]),
+            hypothesis_outline_twin_losses: Vec::new(),
+            truth_thermal_residuals: None,
+            truth_thermal_facing: None,
+            hypothesis_thermal_facing: Vec::new(),
             class,
             // One start closed, one diverged.
             basin: vec![

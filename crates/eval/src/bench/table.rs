@@ -201,7 +201,7 @@ pub fn diagnosis_table(r: &Report) -> String {
     for k in FailureClass::ALL {
         s.push_str(&format!(" {} |", k.heading()));
     }
-    s.push_str(" of the search failures, reachable by our model | full model failed | data term, median: fit / truth / truth through the true objects / our model refined from the truth | the truth beats its front/back flip: data term / mask | stage 1's mirror on the mask, median: reflected-ray angle (°) / offset at the person (m) |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str(" of the search failures, reachable by our model | full model failed | data term, median: fit / truth / truth through the true objects / our model refined from the truth | the truth beats its front/back flip: data term / mask; its outline twin (data term); the thermal judge at the truth right | stage 1's mirror on the mask, median: reflected-ray angle (°) / offset at the person (m) |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for c in Cell::ALL {
         let caps = of_cell(r, c);
         if caps.is_empty() {
@@ -247,10 +247,31 @@ pub fn diagnosis_table(r: &Report) -> String {
             .filter(|d| d.truth_mask_losses.is_some_and(|[t, f]| t < f))
             .count();
         let scored = ds.iter().filter(|d| d.truth_flip_loss.is_some()).count();
+        // The thermal values alone: the outline twin (same outline, front and back swapped),
+        // and the thermal judge at the true root and facing.
+        let beats_twin = ds
+            .iter()
+            .filter(|d| {
+                d.truth_outline_twin_losses
+                    .is_some_and(|[t, _]| d.truth_loss < t)
+            })
+            .count();
+        let twins = ds
+            .iter()
+            .filter(|d| d.truth_outline_twin_losses.is_some())
+            .count();
+        let judged = ds
+            .iter()
+            .filter(|d| d.truth_thermal_facing.is_some())
+            .count();
+        let judge = ds
+            .iter()
+            .filter(|d| d.truth_thermal_facing.is_some_and(|[own, twin]| own < twin))
+            .count();
         let angle: Vec<f64> = ds.iter().filter_map(|d| d.mask_ray_angle_deg).collect();
         let offset: Vec<f64> = ds.iter().filter_map(|d| d.mask_ray_offset_m).collect();
         s.push_str(&format!(
-            " {reachable} | {failed} | {} / {} / {} / {} | {beats} / {beats_mask} of {scored} | {} / {} |\n",
+            " {reachable} | {failed} | {} / {} / {} / {} | {beats} / {beats_mask} of {scored}; {beats_twin} of {twins}; {judge} of {judged} | {} / {} |\n",
             median(&fit),
             median(&truth),
             median(&through),

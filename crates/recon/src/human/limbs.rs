@@ -274,6 +274,56 @@ impl HumanProblem<'_> {
             .collect()
     }
 
+    /// A body mesh's outline twin as the mirror sees it: each vertex kept on its line of sight
+    /// from the reflection's viewpoint (the mean origin of the mask's rays: where on the objects
+    /// the person is seen) and moved to the other side of the vertical plane through `root`
+    /// across that line (distance `s` along its line → `2 s₀ − s`, `s₀` the plane's). The
+    /// outline from the viewpoint stays; front and back change places, the face with the back
+    /// of the head and a forearm in front of the torso with one behind it — what a body facing
+    /// the other way shows the mirror, in everything but the thermal values and occlusion. Not
+    /// a body of the model (the depth flip is not rigid): it asks the data term which way the
+    /// given mesh faces at its own pose.
+    pub fn outline_twin_mesh(
+        &self,
+        vertices: &[nalgebra::Vector3<f64>],
+        root: &nalgebra::Vector3<f64>,
+    ) -> Vec<nalgebra::Vector3<f64>> {
+        use nalgebra::Vector3;
+        let (mut sum, mut n) = (Vector3::zeros(), 0usize);
+        for (i, o) in self.rays.origin.iter().enumerate() {
+            if self.mask.data.get(self.rays.pixel[i] as usize) == Some(&true) {
+                sum += o;
+                n += 1;
+            }
+        }
+        let c = if n > 0 {
+            sum / n as f64
+        } else {
+            self.objects_centre
+        };
+        let up = self.up.normalize();
+        let mut line = root - c;
+        line -= up * up.dot(&line);
+        let Some(d) = line.try_normalize(1e-9) else {
+            return vertices.to_vec();
+        };
+        let plane = (root - c).dot(&d);
+        vertices
+            .iter()
+            .map(|p| {
+                let v = p - c;
+                let s = v.norm();
+                let along = v.dot(&d);
+                if s < 1e-9 || along < 1e-3 * s {
+                    return *p;
+                }
+                let u = v / s;
+                let s0 = plane * s / along;
+                c + u * (2.0 * s0 - s)
+            })
+            .collect()
+    }
+
     /// The silhouette twin of `st`: its body reflected through the root in the vertical plane
     /// across the objects→person line — the pose mirrored left/right (re-encoded by the prior;
     /// the residual folded in, then dropped) and the root turned by twice the angle between

@@ -46,6 +46,7 @@
 
 mod bank;
 mod edge;
+mod facing;
 mod limbs;
 mod observe;
 mod problem;

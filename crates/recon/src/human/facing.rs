@@ -1,0 +1,216 @@
+//! Which way a person faces, from the thermal values in the reflection's virtual view.
+//!
+//! A binary silhouette barely tells a person facing the mirror from one facing away: the body
+//! reflected front to back through its root (its silhouette twin) casts the same outline.
+//! The thermal image does not: a face is warmer than the hair on the back of a head, and a
+//! bare forearm in front of the torso shows where one behind it is hidden. The data term
+//! holds that cue, but only where the pose is nearly right: a fit's misplaced head and arms
+//! drown it (README, "Twenty-fourth run"). So the facing is judged as the retrieval
+//! ([`super::retrieve`]) judges a pose — in the virtual view, with a tolerance: at a state's
+//! root and facing, and at its twin's, the source poses whose outlines fit best are drawn with
+//! their body regions (the nearest surface along the view's axis in each 2 cm cell), each
+//! region at its temperature prior's centre, blurred over 3 × 3 cells; each mask ray's
+//! observed rise is compared with the drawn contrast at its cell (at the outline's best shift)
+//! by the residual of the best gain, over the observed rise's energy. The lower of the two
+//! facings' best residuals wins.
+
+use super::radiometric::Radiometry;
+use super::retrieve::{RetrievalConfig, View, side};
+use super::{HumanProblem, HumanState, Hypothesis};
+use crate::ReconError;
+use nalgebra::Vector3;
+use std::collections::HashMap;
+
+impl HumanProblem<'_> {
+    /// The thermal residual of body `vertices` in `views` (module docs): `Σ (o − a p)² / Σ o²`
+    /// over the mask rays of every view, `a ≥ 0` fitted per view.
+    fn thermal_residual(
+        &self,
+        vertices: &[Vector3<f64>],
+        views: &[View],
+        cfg: &RetrievalConfig,
+        (rad, observed): (&Radiometry, &HashMap<u32, f64>),
+    ) -> f64 {
+        let n = side(cfg);
+        let centroid: Vec<Vector3<f64>> = self
+            .model
+            .asset
+            .faces
+            .iter()
+            .map(|f| {
+                f.iter()
+                    .map(|&i| vertices[i as usize])
+                    .sum::<Vector3<f64>>()
+                    / 3.0
+            })
+            .collect();
+        let (mut res, mut energy) = (0.0, 0.0);
+        for view in views {
+            let (_, (du, dv)) = self.view_score(vertices, view, cfg);
+            // The nearest triangle per cell, seen from the view's centre.
+            let mut near = vec![(f64::INFINITY, usize::MAX); n * n];
+            let dist: Vec<f64> = centroid
+                .iter()
+                .map(|c| (c - view.centre).dot(&view.axis))
+                .collect();
+            self.cover(vertices, view, cfg, |t, cell| {
+                if dist[t] < near[cell].0 {
+                    near[cell] = (dist[t], t);
+                }
+            });
+            let drawn: Vec<f64> = near
+                .iter()
+                .map(|&(_, t)| {
+                    if t == usize::MAX {
+                        0.0
+                    } else {
+                        rad.contrast_at[rad.triangle_region[t].index()][0]
+                    }
+                })
+                .collect();
+            let at = |x: i32, y: i32| {
+                let mut s = 0.0;
+                for (ox, oy) in (-1..=1).flat_map(|a| (-1..=1).map(move |b| (a, b))) {
+                    let (cx, cy) = (x + ox, y + oy);
+                    if cx >= 0 && cy >= 0 && (cx as usize) < n && (cy as usize) < n {
+                        s += drawn[cy as usize * n + cx as usize];
+                    }
+                }
+                s / 9.0
+            };
+            let pairs: Vec<(f64, f64)> = view
+                .mask
+                .iter()
+                .zip(&view.mask_ray)
+                .filter_map(|(&(x, y), &i)| {
+                    let o = *observed.get(&self.rays.pixel[i])?;
+                    Some((o, at(x + du, y + dv)))
+                })
+                .collect();
+            let (op, pp, oo) = pairs.iter().fold((0.0, 0.0, 0.0), |(a, b, c), (o, p)| {
+                (a + o * p, b + p * p, c + o * o)
+            });
+            let gain = if pp > 0.0 { (op / pp).max(0.0) } else { 0.0 };
+            res += oo - 2.0 * gain * op + gain * gain * pp;
+            energy += oo;
+        }
+        if energy > 0.0 {
+            res / energy
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// [`Self::thermal_residual`] of any body `vertices` in the views through `root` (`None`:
+    /// no radiometric observations, or no view sees the mask).
+    pub fn thermal_residual_at(
+        &self,
+        root: &Vector3<f64>,
+        vertices: &[Vector3<f64>],
+        cfg: &RetrievalConfig,
+    ) -> Option<f64> {
+        let rad = self.radiometry?;
+        let observed = observed_rise(rad);
+        let views = self.views(root, cfg);
+        (!views.is_empty()).then(|| self.thermal_residual(vertices, &views, cfg, (rad, &observed)))
+    }
+
+    /// The thermal judge of `st`'s facing (module docs): the best thermal residual among the
+    /// `top` source poses whose outlines fit best at `st`'s root and facing, and the same at
+    /// its silhouette twin's ([`Self::twin`]). `None` without the radiometric observations or
+    /// a view that sees the mask.
+    pub fn thermal_facing(
+        &self,
+        st: &HumanState,
+        cfg: &RetrievalConfig,
+        top: usize,
+    ) -> Result<Option<[f64; 2]>, ReconError> {
+        let Some(rad) = self.radiometry else {
+            return Ok(None);
+        };
+        let observed = observed_rise(rad);
+        let views = self.views(&st.translation, cfg);
+        if views.is_empty() {
+            return Ok(None);
+        }
+        let shaped = super::shaped_body(self.model, &st.build, st.height)?;
+        let mut out = [f64::INFINITY; 2];
+        for (k, s) in [st.clone(), self.twin(st)?].iter().enumerate() {
+            for (cand, _) in self.retrieval_candidates(s, cfg)?.iter().take(top.max(1)) {
+                let body = self.model.pose(
+                    &shaped,
+                    &irmirror_body::Pose {
+                        rotations: super::joint_rotations(self.prior, cand)?,
+                        translation: cand.translation,
+                    },
+                )?;
+                let r = self.thermal_residual(&body.vertices, &views, cfg, (rad, &observed));
+                out[k] = out[k].min(r);
+            }
+        }
+        Ok(Some(out))
+    }
+}
+
+/// The observed rise by pixel.
+fn observed_rise(rad: &Radiometry) -> HashMap<u32, f64> {
+    rad.pixel
+        .iter()
+        .copied()
+        .zip(rad.rise_k.iter().copied())
+        .collect()
+}
+
+impl HumanProblem<'_> {
+    /// With `facing` on: each survivor turned to its silhouette twin when the thermal judge
+    /// prefers the twin's facing (the pose is left to the refinement or the retrieval).
+    pub(super) fn facing_swap(
+        &self,
+        survivors: Vec<HumanState>,
+        cfg: &RetrievalConfig,
+    ) -> Result<Vec<HumanState>, ReconError> {
+        if !cfg.facing {
+            return Ok(survivors);
+        }
+        let t0 = std::time::Instant::now();
+        let out = survivors
+            .into_iter()
+            .map(|st| match self.thermal_facing(&st, cfg, cfg.facing_top)? {
+                Some([own, twin]) if twin < own => {
+                    tracing::debug!("facing judge: survivor turned ({own:.4} → {twin:.4})");
+                    self.twin(&st)
+                }
+                _ => Ok(st),
+            })
+            .collect::<Result<_, ReconError>>()?;
+        tracing::debug!("facing judge: {:.2} s", t0.elapsed().as_secs_f64());
+        Ok(out)
+    }
+
+    /// With `facing` on: the first of the hypotheses (sorted by loss) the thermal judge does
+    /// not turn is moved to the front; the order stays when it turns every one.
+    pub(super) fn facing_rank(
+        &self,
+        scored: &mut Vec<(Hypothesis, HumanState)>,
+        cfg: &RetrievalConfig,
+    ) -> Result<(), ReconError> {
+        if !cfg.facing {
+            return Ok(());
+        }
+        for i in 0..scored.len() {
+            match self.thermal_facing(&scored[i].1, cfg, cfg.facing_top)? {
+                Some([own, twin]) if twin < own => continue,
+                Some(_) => {
+                    if i > 0 {
+                        tracing::debug!("facing judge: hypothesis {i} ranked first");
+                        let h = scored.remove(i);
+                        scored.insert(0, h);
+                    }
+                    return Ok(());
+                }
+                None => return Ok(()),
+            }
+        }
+        Ok(())
+    }
+}
