@@ -523,13 +523,7 @@ fn the_thermal_judge_prefers_the_true_facing() {
 fn the_outline_twin_keeps_the_outline_and_turns_the_thermal_values() {
     use irmirror_recon::human::*;
     with_thermal_car(1, |problem, _, sim, _, _| {
-        let truth: Vec<Vector3<f64>> = sim
-            .body
-            .mesh
-            .vertices
-            .iter()
-            .map(|v| Vector3::from(v.map(f64::from)))
-            .collect();
+        let truth = true_vertices(sim);
         let root = sim.body.joints[0];
         let twin = problem.outline_twin_mesh(&truth, &root);
         let back = problem.outline_twin_mesh(&twin, &root);

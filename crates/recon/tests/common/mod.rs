@@ -119,6 +119,16 @@ pub fn preprocessed(
     }
 }
 
+/// The true body's vertices (depth frame), in f64.
+pub fn true_vertices(sim: &irmirror_sim::Simulation) -> Vec<Vector3<f64>> {
+    sim.body
+        .mesh
+        .vertices
+        .iter()
+        .map(|v| Vector3::from(v.map(f64::from)))
+        .collect()
+}
+
 /// The true body (depth frame), its BVH and the region of each triangle.
 pub fn true_body(
     sim: &irmirror_sim::Simulation,
@@ -128,13 +138,7 @@ pub fn true_body(
     Vec<irmirror_body::Region>,
 ) {
     use irmirror_body::regions::{triangle_regions, vertex_regions};
-    let verts: Vec<Vector3<f64>> = sim
-        .body
-        .mesh
-        .vertices
-        .iter()
-        .map(|v| Vector3::from(v.map(f64::from)))
-        .collect();
+    let verts = true_vertices(sim);
     let tris = &model().asset.faces;
     let bvh = irmirror_render::Bvh::build(&verts, tris);
     let regions = triangle_regions(&vertex_regions(model()).unwrap(), tris);
