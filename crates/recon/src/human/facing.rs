@@ -162,8 +162,10 @@ fn observed_rise(rad: &Radiometry) -> HashMap<u32, f64> {
 }
 
 impl HumanProblem<'_> {
-    /// With `facing` on: each survivor turned to its silhouette twin when the thermal judge
-    /// prefers the twin's facing (the pose is left to the refinement or the retrieval).
+    /// With `[human.retrieval] facing` on: each survivor turned to its silhouette twin when
+    /// the thermal judge prefers the twin's facing (the pose is left to the refinement or the
+    /// retrieval). A problem without radiometric observations (the paper's mask mode, `--ablate
+    /// radiometric`) has no judge: nothing is turned.
     pub(super) fn facing_swap(
         &self,
         survivors: Vec<HumanState>,
@@ -187,8 +189,9 @@ impl HumanProblem<'_> {
         Ok(out)
     }
 
-    /// With `facing` on: the first of the hypotheses (sorted by loss) the thermal judge does
-    /// not turn is moved to the front; the order stays when it turns every one.
+    /// With `facing` on (as [`Self::facing_swap`]): the first of the hypotheses (sorted by
+    /// loss) the thermal judge does not turn is moved to the front; the order stays when it
+    /// turns every one.
     pub(super) fn facing_rank(
         &self,
         scored: &mut Vec<(Hypothesis, HumanState)>,
