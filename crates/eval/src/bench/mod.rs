@@ -336,7 +336,7 @@ mod tests {
             truth_outline_twin_losses: Some([0.3, 0.21]),
             hypothesis_outline_twin_losses: Vec::new(),
             truth_thermal_residuals: None,
-            truth_thermal_facing: None,
+            truth_thermal_facing: Some([0.1, 0.2]),
             hypothesis_thermal_facing: Vec::new(),
             class,
             // One start closed, one diverged.
@@ -433,7 +433,7 @@ mod tests {
         );
         // Diagnosis counts: one success, one search failure, none by information, one failed.
         assert!(
-            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 1 | 0.300 / 0.200 / 0.100 / 0.250 | 2 / 0 of 2 | 0.400 / 0.020 |"),
+            t.contains("| tabletop-mug | 3 | 1 | 1 | 0 | 1 | 1 | 0.300 / 0.200 / 0.100 / 0.250 | 2 / 0 of 2; 2 of 2; 2 of 2 | 0.400 / 0.020 |"),
             "{t}"
         );
         // The basin: two probed captures, two starts each, one closed and one diverged.
