@@ -245,9 +245,11 @@ fn eval_writes_table_results_and_report() {
             2,
             "{c}"
         );
-        assert_eq!(
-            d["truth_thermal_facing"].as_array().unwrap().len(),
-            2,
+        // (null where no view through the true root sees the mask: a fitted mirror that sends
+        // the mask's rays elsewhere.)
+        let judge = &d["truth_thermal_facing"];
+        assert!(
+            judge.is_null() || judge.as_array().unwrap().len() == 2,
             "{c}"
         );
         let twins = d["hypothesis_outline_twin_losses"].as_array().unwrap();
