@@ -78,7 +78,7 @@ impl HumanProblem<'_> {
                 }
                 s / 9.0
             };
-            let pairs: Vec<(f64, f64)> = view
+            let (op, pp, oo) = view
                 .mask
                 .iter()
                 .zip(&view.mask_ray)
@@ -86,10 +86,9 @@ impl HumanProblem<'_> {
                     let o = *observed.get(&self.rays.pixel[i])?;
                     Some((o, at(x + du, y + dv)))
                 })
-                .collect();
-            let (op, pp, oo) = pairs.iter().fold((0.0, 0.0, 0.0), |(a, b, c), (o, p)| {
-                (a + o * p, b + p * p, c + o * o)
-            });
+                .fold((0.0, 0.0, 0.0), |(a, b, c), (o, p)| {
+                    (a + o * p, b + p * p, c + o * o)
+                });
             let gain = if pp > 0.0 { (op / pp).max(0.0) } else { 0.0 };
             res += oo - 2.0 * gain * op + gain * gain * pp;
             energy += oo;
@@ -137,13 +136,7 @@ impl HumanProblem<'_> {
         let mut out = [f64::INFINITY; 2];
         for (k, s) in [st.clone(), self.twin(st)?].iter().enumerate() {
             for (cand, _) in self.retrieval_candidates(s, cfg)?.iter().take(top.max(1)) {
-                let body = self.model.pose(
-                    &shaped,
-                    &irmirror_body::Pose {
-                        rotations: super::joint_rotations(self.prior, cand)?,
-                        translation: cand.translation,
-                    },
-                )?;
+                let body = self.posed_with(&shaped, cand)?;
                 let r = self.thermal_residual(&body.vertices, &views, cfg, (rad, &observed));
                 out[k] = out[k].min(r);
             }

@@ -129,7 +129,7 @@ pub(super) struct View {
 
 impl View {
     /// `p`'s raster cell in the plane, projected from the centre (`None`: behind the centre).
-    pub(super) fn project(&self, p: &Vector3<f64>, cfg: &RetrievalConfig) -> Option<(f64, f64)> {
+    fn project(&self, p: &Vector3<f64>, cfg: &RetrievalConfig) -> Option<(f64, f64)> {
         let along = (p - self.centre).dot(&self.axis);
         if along < 1e-3 {
             return None;
@@ -402,19 +402,28 @@ impl HumanProblem<'_> {
             .par_iter()
             .enumerate()
             .map(|(i, mode)| {
-                let tried = self.in_mode(st, mode);
-                let body = self.model.pose(
-                    &shaped,
-                    &irmirror_body::Pose {
-                        rotations: super::joint_rotations(self.prior, &tried)?,
-                        translation: tried.translation,
-                    },
-                )?;
+                let body = self.posed_with(&shaped, &self.in_mode(st, mode))?;
                 Ok((i, self.retrieval_score(&body.vertices, &views, cfg)))
             })
             .collect::<Result<_, ReconError>>()?;
         scored.sort_by(|a, b| a.1.total_cmp(&b.1));
         Ok(scored)
+    }
+
+    /// State `st`'s body on the already shaped `shaped` (the retrieval poses hundreds of
+    /// bodies of one height: the shape is made once).
+    pub(super) fn posed_with(
+        &self,
+        shaped: &irmirror_body::ShapedBody<f64>,
+        st: &HumanState,
+    ) -> Result<irmirror_body::PosedBody<f64>, ReconError> {
+        Ok(self.model.pose(
+            shaped,
+            &irmirror_body::Pose {
+                rotations: super::joint_rotations(self.prior, st)?,
+                translation: st.translation,
+            },
+        )?)
     }
 
     /// The retrieval score of any body `vertices` (depth frame) in the views through `root`
