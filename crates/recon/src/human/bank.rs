@@ -25,6 +25,9 @@ use rayon::prelude::*;
 pub(super) struct PoseMode {
     pub latent: Vec<f64>,
     pub root_height: f64,
+    /// The latent's decoded joint rotations, root identity: the retrieval poses every mode
+    /// at every state it judges, so each is decoded once.
+    pub rotations: Vec<Matrix3<f64>>,
 }
 
 /// Squared distance of two poses: the sum over body joints of their rotation vectors'.
@@ -85,7 +88,7 @@ impl HumanProblem<'_> {
         let body = self.model.pose(
             shaped,
             &irmirror_body::Pose {
-                rotations,
+                rotations: rotations.clone(),
                 translation: Vector3::zeros(),
             },
         )?;
@@ -97,6 +100,7 @@ impl HumanProblem<'_> {
         Ok(PoseMode {
             latent,
             root_height: -lowest,
+            rotations,
         })
     }
 
@@ -141,15 +145,19 @@ impl HumanProblem<'_> {
 
     /// `st` in pose `mode`: the residual dropped, the feet moved to the floor when it is known.
     pub(super) fn in_mode(&self, st: &HumanState, mode: &PoseMode) -> HumanState {
-        let translation = match self.floor {
-            Some(f) => st.translation + f.up * (mode.root_height - f.height(&st.translation)),
-            None => st.translation,
-        };
         HumanState {
-            translation,
+            translation: self.mode_root(st, mode),
             latent: mode.latent.clone(),
             residual: Vec::new(),
             ..st.clone()
+        }
+    }
+
+    /// The root of `st` in pose `mode` ([`Self::in_mode`]).
+    pub(super) fn mode_root(&self, st: &HumanState, mode: &PoseMode) -> Vector3<f64> {
+        match self.floor {
+            Some(f) => st.translation + f.up * (mode.root_height - f.height(&st.translation)),
+            None => st.translation,
         }
     }
 

@@ -14,6 +14,7 @@
 //! by the residual of the best gain, over the observed rise's energy. The lower of the two
 //! facings' best residuals wins.
 
+use super::bank::PoseMode;
 use super::radiometric::Radiometry;
 use super::retrieve::{RetrievalConfig, View, side};
 use super::{HumanProblem, HumanState, Hypothesis};
@@ -124,6 +125,18 @@ impl HumanProblem<'_> {
         cfg: &RetrievalConfig,
         top: usize,
     ) -> Result<Option<[f64; 2]>, ReconError> {
+        self.thermal_facing_in(st, &self.pose_bank(usize::MAX, st.height)?, cfg, top)
+    }
+
+    /// [`Self::thermal_facing`] among the poses of `bank` (the source poses at `st`'s height:
+    /// a caller judging many states makes it once).
+    fn thermal_facing_in(
+        &self,
+        st: &HumanState,
+        bank: &[PoseMode],
+        cfg: &RetrievalConfig,
+        top: usize,
+    ) -> Result<Option<[f64; 2]>, ReconError> {
         let Some(rad) = self.radiometry else {
             return Ok(None);
         };
@@ -135,13 +148,32 @@ impl HumanProblem<'_> {
         let shaped = super::shaped_body(self.model, &st.build, st.height)?;
         let mut out = [f64::INFINITY; 2];
         for (k, s) in [st.clone(), self.twin(st)?].iter().enumerate() {
-            for (cand, _) in self.retrieval_candidates(s, cfg)?.iter().take(top.max(1)) {
+            for (cand, _) in self.candidates_in(s, bank, cfg)?.iter().take(top.max(1)) {
                 let body = self.posed_with(&shaped, cand)?;
                 let r = self.thermal_residual(&body.vertices, &views, cfg, (rad, &observed));
                 out[k] = out[k].min(r);
             }
         }
         Ok(Some(out))
+    }
+}
+
+/// The source poses at each height judged so far (a caller judging many states makes each
+/// height's once).
+#[derive(Default)]
+struct Banks(Vec<(f64, Vec<PoseMode>)>);
+
+impl Banks {
+    fn at(&mut self, problem: &HumanProblem<'_>, height: f64) -> Result<&[PoseMode], ReconError> {
+        let i = match self.0.iter().position(|(h, _)| *h == height) {
+            Some(i) => i,
+            None => {
+                self.0
+                    .push((height, problem.pose_bank(usize::MAX, height)?));
+                self.0.len() - 1
+            }
+        };
+        Ok(&self.0[i].1)
     }
 }
 
@@ -168,14 +200,18 @@ impl HumanProblem<'_> {
             return Ok(survivors);
         }
         let t0 = std::time::Instant::now();
+        let mut banks = Banks::default();
         let out = survivors
             .into_iter()
-            .map(|st| match self.thermal_facing(&st, cfg, cfg.facing_top)? {
-                Some([own, twin]) if twin < own => {
-                    tracing::debug!("facing judge: survivor turned ({own:.4} → {twin:.4})");
-                    self.twin(&st)
+            .map(|st| {
+                let bank = banks.at(self, st.height)?;
+                match self.thermal_facing_in(&st, bank, cfg, cfg.facing_top)? {
+                    Some([own, twin]) if twin < own => {
+                        tracing::debug!("facing judge: survivor turned ({own:.4} → {twin:.4})");
+                        self.twin(&st)
+                    }
+                    _ => Ok(st),
                 }
-                _ => Ok(st),
             })
             .collect::<Result<_, ReconError>>()?;
         tracing::debug!("facing judge: {:.2} s", t0.elapsed().as_secs_f64());
@@ -193,8 +229,10 @@ impl HumanProblem<'_> {
         if !cfg.facing {
             return Ok(());
         }
+        let mut banks = Banks::default();
         for i in 0..scored.len() {
-            match self.thermal_facing(&scored[i].1, cfg, cfg.facing_top)? {
+            let bank = banks.at(self, scored[i].1.height)?;
+            match self.thermal_facing_in(&scored[i].1, bank, cfg, cfg.facing_top)? {
                 Some([own, twin]) if twin < own => continue,
                 Some(_) => {
                     if i > 0 {

@@ -180,28 +180,99 @@ fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
     }
 }
 
-/// Distance (cells) from every cell of an `n`×`n` raster to the nearest cell where `seed` is
-/// true (large where there is none).
-fn distance_to(seed: &[bool], n: usize) -> Vec<f64> {
+/// Distance (cells) from every cell of a `w`×`h` raster (rows of `w`) to the nearest cell
+/// where `seed` is true (large where there is none).
+fn distance_to(seed: &[bool], w: usize, h: usize) -> Vec<f64> {
     const FAR: f64 = 1e12;
     let mut g: Vec<f64> = seed.iter().map(|&s| if s { 0.0 } else { FAR }).collect();
-    let (mut d, mut v, mut z) = (vec![0.0; n], vec![0; n], vec![0.0; n + 1]);
-    let mut line = vec![0.0; n];
-    for row in 0..n {
-        line.copy_from_slice(&g[row * n..(row + 1) * n]);
-        edt_1d(&line, &mut d, &mut v, &mut z);
-        g[row * n..(row + 1) * n].copy_from_slice(&d);
+    let m = w.max(h);
+    let (mut d, mut v, mut z) = (vec![0.0; m], vec![0; m], vec![0.0; m + 1]);
+    let mut line = vec![0.0; m];
+    for row in 0..h {
+        line[..w].copy_from_slice(&g[row * w..(row + 1) * w]);
+        edt_1d(&line[..w], &mut d[..w], &mut v, &mut z);
+        g[row * w..(row + 1) * w].copy_from_slice(&d[..w]);
     }
-    for col in 0..n {
-        for (r, l) in line.iter_mut().enumerate() {
-            *l = g[r * n + col];
+    for col in 0..w {
+        for (r, l) in line[..h].iter_mut().enumerate() {
+            *l = g[r * w + col];
         }
-        edt_1d(&line, &mut d, &mut v, &mut z);
-        for (r, x) in d.iter().enumerate() {
-            g[r * n + col] = x.sqrt();
+        edt_1d(&line[..h], &mut d[..h], &mut v, &mut z);
+        for (r, x) in d[..h].iter().enumerate() {
+            g[r * w + col] = x.sqrt();
         }
     }
     g
+}
+
+/// A silhouette's two distance maps (cells), truncated at `cap`, kept only on the window
+/// about it where they can differ from their far values: `cap` to the silhouette and 0 to its
+/// outside (the window reaches `cap` + 1 cells beyond the silhouette, so both are exact).
+struct Distances {
+    x0: i32,
+    y0: i32,
+    w: i32,
+    h: i32,
+    to_sil: Vec<f64>,
+    to_out: Vec<f64>,
+    cap: f64,
+}
+
+impl Distances {
+    fn new(sil: &[bool], n: usize, cap: f64) -> Self {
+        let (mut lo, mut hi) = ((n, n), (0, 0));
+        for (c, _) in sil.iter().enumerate().filter(|(_, s)| **s) {
+            let (x, y) = (c % n, c / n);
+            lo = (lo.0.min(x), lo.1.min(y));
+            hi = (hi.0.max(x), hi.1.max(y));
+        }
+        if lo.0 > hi.0 {
+            return Self {
+                x0: 0,
+                y0: 0,
+                w: 0,
+                h: 0,
+                to_sil: Vec::new(),
+                to_out: Vec::new(),
+                cap,
+            };
+        }
+        let margin = cap.ceil() as usize + 1;
+        let (x0, y0) = (lo.0.saturating_sub(margin), lo.1.saturating_sub(margin));
+        let (x1, y1) = ((hi.0 + margin).min(n - 1), (hi.1 + margin).min(n - 1));
+        let (w, h) = (x1 - x0 + 1, y1 - y0 + 1);
+        let crop: Vec<bool> = (y0..=y1)
+            .flat_map(|y| sil[y * n + x0..=y * n + x1].iter().copied())
+            .collect();
+        let outside: Vec<bool> = crop.iter().map(|s| !s).collect();
+        Self {
+            x0: x0 as i32,
+            y0: y0 as i32,
+            w: w as i32,
+            h: h as i32,
+            to_sil: distance_to(&crop, w, h),
+            to_out: distance_to(&outside, w, h),
+            cap,
+        }
+    }
+
+    /// The window's index of raster cell `(x, y)`, if it lies in the window.
+    fn index(&self, x: i32, y: i32) -> Option<usize> {
+        let (u, v) = (x - self.x0, y - self.y0);
+        (u >= 0 && v >= 0 && u < self.w && v < self.h).then(|| (v * self.w + u) as usize)
+    }
+
+    /// Distance to the silhouette, truncated (a cell beyond the window: `cap`).
+    fn to_sil(&self, x: i32, y: i32) -> f64 {
+        self.index(x, y)
+            .map_or(self.cap, |i| self.to_sil[i].min(self.cap))
+    }
+
+    /// Distance to the silhouette's outside, truncated (a cell beyond the window: 0).
+    fn to_out(&self, x: i32, y: i32) -> f64 {
+        self.index(x, y)
+            .map_or(0.0, |i| self.to_out[i].min(self.cap))
+    }
 }
 
 impl HumanProblem<'_> {
@@ -352,29 +423,47 @@ impl HumanProblem<'_> {
         let step = ((cfg.shift_step_m / cfg.cell_m).round() as i32).max(1);
         let reach = (cfg.shift_m / cfg.cell_m / f64::from(step)).round() as i32;
         let cap = cfg.truncate_m / cfg.cell_m;
-        let sil = self.silhouette(vertices, view, cfg);
-        let to_sil = distance_to(&sil, n);
-        let outside: Vec<bool> = sil.iter().map(|s| !s).collect();
-        let to_out = distance_to(&outside, n);
-        let at = |d: &[f64], (x, y): (i32, i32)| {
-            if x < 0 || y < 0 || x >= n as i32 || y >= n as i32 {
-                // Off the raster: no body there.
-                return None;
-            }
-            Some(d[y as usize * n + x as usize].min(cap))
-        };
+        let dist = Distances::new(&self.silhouette(vertices, view, cfg), n, cap);
+        let on_raster = |x: i32, y: i32| x >= 0 && y >= 0 && x < n as i32 && y < n as i32;
+        // Only the rays outside the mask that some shift brings into the window can spill.
+        let r = reach * step;
+        let near: Vec<(i32, i32)> = view
+            .empty
+            .iter()
+            .copied()
+            .filter(|&(x, y)| {
+                x + r >= dist.x0
+                    && y + r >= dist.y0
+                    && x - r < dist.x0 + dist.w
+                    && y - r < dist.y0 + dist.h
+            })
+            .collect();
         let mut best = (f64::INFINITY, (0, 0));
         for du in (-reach..=reach).map(|k| k * step) {
             for dv in (-reach..=reach).map(|k| k * step) {
+                // Off the raster: no body there.
                 let miss: f64 = view
                     .mask
                     .iter()
-                    .map(|&(x, y)| at(&to_sil, (x + du, y + dv)).unwrap_or(cap))
+                    .map(|&(x, y)| {
+                        let (x, y) = (x + du, y + dv);
+                        if on_raster(x, y) {
+                            dist.to_sil(x, y)
+                        } else {
+                            cap
+                        }
+                    })
                     .sum();
-                let spill: f64 = view
-                    .empty
+                let spill: f64 = near
                     .iter()
-                    .map(|&(x, y)| at(&to_out, (x + du, y + dv)).unwrap_or(0.0))
+                    .map(|&(x, y)| {
+                        let (x, y) = (x + du, y + dv);
+                        if on_raster(x, y) {
+                            dist.to_out(x, y)
+                        } else {
+                            0.0
+                        }
+                    })
                     .sum();
                 if miss + spill < best.0 {
                     best = (miss + spill, (du, dv));
@@ -402,7 +491,15 @@ impl HumanProblem<'_> {
             .par_iter()
             .enumerate()
             .map(|(i, mode)| {
-                let body = self.posed_with(&shaped, &self.in_mode(st, mode))?;
+                let mut rotations = mode.rotations.clone();
+                rotations[0] = st.rotation;
+                let body = self.model.pose(
+                    &shaped,
+                    &irmirror_body::Pose {
+                        rotations,
+                        translation: self.mode_root(st, mode),
+                    },
+                )?;
                 Ok((i, self.retrieval_score(&body.vertices, &views, cfg)))
             })
             .collect::<Result<_, ReconError>>()?;
@@ -450,7 +547,7 @@ impl HumanProblem<'_> {
     }
 
     /// [`Self::retrieval_candidates`] among the poses of `bank`.
-    fn candidates_in(
+    pub(super) fn candidates_in(
         &self,
         st: &HumanState,
         bank: &[PoseMode],
@@ -570,24 +667,57 @@ mod tests {
 
     #[test]
     fn the_distance_transform_is_euclidean() {
-        let n = 9;
-        let mut seed = vec![false; n * n];
-        for &(x, y) in &[(1usize, 1usize), (7, 2), (4, 8)] {
-            seed[y * n + x] = true;
+        let (w, h) = (9, 6);
+        let seeds = [(1usize, 1usize), (7, 2), (4, 5)];
+        let mut seed = vec![false; w * h];
+        for &(x, y) in &seeds {
+            seed[y * w + x] = true;
         }
-        let d = distance_to(&seed, n);
-        for y in 0..n {
-            for x in 0..n {
-                let want = [(1.0f64, 1.0f64), (7.0, 2.0), (4.0, 8.0)]
+        let d = distance_to(&seed, w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let want = seeds
                     .iter()
-                    .map(|&(a, b)| ((x as f64 - a).powi(2) + (y as f64 - b).powi(2)).sqrt())
+                    .map(|&(a, b)| {
+                        ((x as f64 - a as f64).powi(2) + (y as f64 - b as f64).powi(2)).sqrt()
+                    })
                     .fold(f64::INFINITY, f64::min);
                 assert!(
-                    (d[y * n + x] - want).abs() < 1e-9,
+                    (d[y * w + x] - want).abs() < 1e-9,
                     "{x},{y}: {} vs {want}",
-                    d[y * n + x]
+                    d[y * w + x]
                 );
             }
         }
+    }
+
+    /// The window the distances are kept on changes none of them: an L-shaped silhouette,
+    /// one arm on the raster's edge, against both transforms of the whole raster.
+    #[test]
+    fn the_windowed_distances_equal_the_whole_rasters() {
+        let (n, cap) = (40, 7.5);
+        let mut sil = vec![false; n * n];
+        for y in 0..n {
+            for x in 0..n {
+                sil[y * n + x] = ((10..16).contains(&x) && (12..30).contains(&y))
+                    || ((24..30).contains(&y) && x < 16);
+            }
+        }
+        let outside: Vec<bool> = sil.iter().map(|s| !s).collect();
+        let (to_sil, to_out) = (distance_to(&sil, n, n), distance_to(&outside, n, n));
+        let d = Distances::new(&sil, n, cap);
+        assert!(
+            d.w < n as i32 && d.h < n as i32,
+            "the window is the whole raster"
+        );
+        for y in 0..n {
+            for x in 0..n {
+                let c = y * n + x;
+                assert_eq!(d.to_sil(x as i32, y as i32), to_sil[c].min(cap), "{x},{y}");
+                assert_eq!(d.to_out(x as i32, y as i32), to_out[c].min(cap), "{x},{y}");
+            }
+        }
+        let none = Distances::new(&vec![false; n * n], n, cap);
+        assert_eq!((none.to_sil(3, 4), none.to_out(3, 4)), (cap, 0.0));
     }
 }
