@@ -196,7 +196,7 @@ impl HumanProblem<'_> {
         survivors: Vec<HumanState>,
         cfg: &RetrievalConfig,
     ) -> Result<Vec<HumanState>, ReconError> {
-        if !cfg.facing {
+        if !(cfg.facing && cfg.facing_survivors) {
             return Ok(survivors);
         }
         let t0 = std::time::Instant::now();

@@ -49,6 +49,7 @@ mod edge;
 mod facing;
 mod limbs;
 mod observe;
+mod polish;
 mod problem;
 pub mod radiometric;
 mod refine;
@@ -184,6 +185,7 @@ impl HumanConfig {
             ("residual_ref_px", self.residual_ref_px),
             ("active_margin_m", self.active_margin_m),
             ("refine_lr_scale", self.refine_lr_scale),
+            ("search.yaw_polish_deg", self.search.yaw_polish_deg),
             (
                 "radiometric.polish_lr_scale",
                 self.radiometric.polish_lr_scale,

@@ -60,6 +60,9 @@ pub struct RetrievalConfig {
     pub facing: bool,
     /// The judge compares the best of this many outline-ranked poses per facing.
     pub facing_top: usize,
+    /// With `facing` on, the judge turns the search's survivors too (off: it ranks the
+    /// refined hypotheses only — the survivors' front/back flips are refined either way).
+    pub facing_survivors: bool,
 }
 
 impl Default for RetrievalConfig {
@@ -75,6 +78,7 @@ impl Default for RetrievalConfig {
             mean_of: 1,
             facing: false,
             facing_top: 30,
+            facing_survivors: true,
         }
     }
 }
@@ -275,6 +279,54 @@ impl Distances {
     }
 }
 
+/// Calls `f(triangle, cell)` for every raster cell of `view` whose centre a projected triangle
+/// of the mesh (`faces` on `vertices`) covers. With `front_only`, only the triangles whose
+/// projection winds one way: the body's mesh is closed (every edge shared by two triangles of
+/// opposite winding), so the first surface along each line of sight through its silhouette
+/// already covers it — the same silhouette from half the triangles.
+fn cover(
+    faces: &[[u32; 3]],
+    vertices: &[Vector3<f64>],
+    view: &View,
+    (cfg, front_only): (&RetrievalConfig, bool),
+    mut f: impl FnMut(usize, usize),
+) {
+    let n = side(cfg);
+    let projected: Vec<Option<(f64, f64)>> =
+        vertices.iter().map(|v| view.project(v, cfg)).collect();
+    for (t, face) in faces.iter().enumerate() {
+        let [Some(a), Some(b), Some(c)] = face.map(|i| projected[i as usize]) else {
+            continue;
+        };
+        let lo = |x: f64, y: f64, z: f64| (x.min(y).min(z) - 0.5).ceil().max(0.0) as usize;
+        let hi =
+            |x: f64, y: f64, z: f64| ((x.max(y).max(z) - 0.5).floor() as i64).min(n as i64 - 1);
+        let (x0, x1) = (lo(a.0, b.0, c.0), hi(a.0, b.0, c.0));
+        let (y0, y1) = (lo(a.1, b.1, c.1), hi(a.1, b.1, c.1));
+        if x1 < 0 || y1 < 0 {
+            continue;
+        }
+        let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
+        if area.abs() < 1e-12 || (front_only && area > 0.0) {
+            continue;
+        }
+        let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
+            ((q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)) * area.signum()
+        };
+        for y in y0..=y1 as usize {
+            for x in x0..=x1 as usize {
+                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                if edge(a, b, px, py) >= 0.0
+                    && edge(b, c, px, py) >= 0.0
+                    && edge(c, a, px, py) >= 0.0
+                {
+                    f(t, y * n + x);
+                }
+            }
+        }
+    }
+}
+
 impl HumanProblem<'_> {
     /// Each object's virtual view of the plane through `root` (module docs); objects with no
     /// mask ray in the raster are left out.
@@ -348,7 +400,13 @@ impl HumanProblem<'_> {
     ) -> Vec<bool> {
         let n = side(cfg);
         let mut sil = vec![false; n * n];
-        self.cover(vertices, view, cfg, |_, cell| sil[cell] = true);
+        cover(
+            &self.model.asset.faces,
+            vertices,
+            view,
+            (cfg, true),
+            |_, cell| sil[cell] = true,
+        );
         sil
     }
 
@@ -359,42 +417,9 @@ impl HumanProblem<'_> {
         vertices: &[Vector3<f64>],
         view: &View,
         cfg: &RetrievalConfig,
-        mut f: impl FnMut(usize, usize),
+        f: impl FnMut(usize, usize),
     ) {
-        let n = side(cfg);
-        let projected: Vec<Option<(f64, f64)>> =
-            vertices.iter().map(|v| view.project(v, cfg)).collect();
-        for (t, face) in self.model.asset.faces.iter().enumerate() {
-            let [Some(a), Some(b), Some(c)] = face.map(|i| projected[i as usize]) else {
-                continue;
-            };
-            let lo = |x: f64, y: f64, z: f64| (x.min(y).min(z) - 0.5).ceil().max(0.0) as usize;
-            let hi =
-                |x: f64, y: f64, z: f64| ((x.max(y).max(z) - 0.5).floor() as i64).min(n as i64 - 1);
-            let (x0, x1) = (lo(a.0, b.0, c.0), hi(a.0, b.0, c.0));
-            let (y0, y1) = (lo(a.1, b.1, c.1), hi(a.1, b.1, c.1));
-            if x1 < 0 || y1 < 0 {
-                continue;
-            }
-            let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
-            if area.abs() < 1e-12 {
-                continue;
-            }
-            let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
-                ((q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)) * area.signum()
-            };
-            for y in y0..=y1 as usize {
-                for x in x0..=x1 as usize {
-                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                    if edge(a, b, px, py) >= 0.0
-                        && edge(b, c, px, py) >= 0.0
-                        && edge(c, a, px, py) >= 0.0
-                    {
-                        f(t, y * n + x);
-                    }
-                }
-            }
-        }
+        cover(&self.model.asset.faces, vertices, view, (cfg, false), f);
     }
 
     /// The retrieval score of body `vertices` (depth frame) in `views` (module docs): per view,
@@ -719,5 +744,68 @@ mod tests {
         }
         let none = Distances::new(&vec![false; n * n], n, cap);
         assert_eq!((none.to_sil(3, 4), none.to_out(3, 4)), (cap, 0.0));
+    }
+
+    /// The culled silhouette ([`cover`] with `front_only`) is the whole mesh's, cell for cell,
+    /// for bodies whose arms and legs cross in front of the torso, from the front and the side
+    /// — while it rasterises about half the triangles.
+    #[test]
+    fn the_front_triangles_cast_the_whole_silhouette() {
+        use irmirror_body::prior::generator::PoseGenerator;
+        let model = irmirror_body::BodyModel::builtin().expect("body");
+        let shaped = model
+            .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
+            .expect("shape");
+        let generator = PoseGenerator::new(&model);
+        let mut rng = irmirror_geom::rng::seeded(3, 0);
+        let cfg = RetrievalConfig::default();
+        let n = side(&cfg);
+        for name in ["sit", "wave", "squat"] {
+            let rotvecs = generator.template(name, &mut rng).expect("template");
+            let body = model
+                .pose(
+                    &shaped,
+                    &irmirror_body::Pose::from_axis_angles(&rotvecs, Vector3::zeros()),
+                )
+                .expect("pose");
+            for axis in [Vector3::new(0.0, 1.0, 0.0), Vector3::new(0.8, 0.6, 0.0)] {
+                let up = Vector3::z();
+                let e_v = (up - axis * axis.dot(&up)).normalize();
+                let view = View {
+                    centre: -axis * 1.2,
+                    axis,
+                    e_u: e_v.cross(&axis),
+                    e_v,
+                    root: Vector3::zeros(),
+                    mask: Vec::new(),
+                    mask_ray: Vec::new(),
+                    empty: Vec::new(),
+                };
+                let (mut all, mut front) = (vec![false; n * n], vec![false; n * n]);
+                let (mut tris_all, mut tris_front) = (
+                    std::collections::HashSet::new(),
+                    std::collections::HashSet::new(),
+                );
+                let faces = &model.asset.faces;
+                cover(faces, &body.vertices, &view, (&cfg, false), |t, c| {
+                    all[c] = true;
+                    tris_all.insert(t);
+                });
+                cover(faces, &body.vertices, &view, (&cfg, true), |t, c| {
+                    front[c] = true;
+                    tris_front.insert(t);
+                });
+                let cells = all.iter().filter(|c| **c).count();
+                assert!(cells > 500, "{name}: {cells} cells");
+                let differ = all.iter().zip(&front).filter(|(a, b)| a != b).count();
+                assert_eq!(differ, 0, "{name}, axis {axis:?}: cells of {cells} differ");
+                assert!(
+                    tris_front.len() * 10 < tris_all.len() * 7,
+                    "{name}: {} of {} triangles",
+                    tris_front.len(),
+                    tris_all.len()
+                );
+            }
+        }
     }
 }

@@ -44,6 +44,7 @@
 //!    batch at half the rates on 1. A larger capture (a car door) keeps the fresh
 //!    draws at the full rates ([`HumanProblem::refine_sample`]).
 
+use super::polish::polish_best;
 use super::problem::{Draw, FullEval};
 use super::scratch::Scratch;
 use super::{
@@ -125,6 +126,12 @@ pub struct SearchConfig {
     /// median 0.166 → 0.130 m but per-vertex −0.006 ± 0.023 m, and +10.5 s a frame (README,
     /// "Seventeenth run").
     pub limb_polish: usize,
+    /// The best refined hypotheses (by the full loss) the yaw polish tries to better
+    /// ([`HumanProblem::yaw_polish`]: the root turned by ± `yaw_polish_deg` about the up axis,
+    /// each refined again, the lowest kept when below the hypothesis); 0 (default): none.
+    pub yaw_polish: usize,
+    /// The yaw polish's turn, degrees.
+    pub yaw_polish_deg: f64,
     /// Each survivor's partner is its silhouette twin ([`HumanProblem::twin`]: pose mirrored,
     /// root turned so an orthographic view along the objects→person line is unchanged) rather
     /// than its root turned 180° (`flipped`). Off:
@@ -154,6 +161,8 @@ impl Default for SearchConfig {
             limb_sweeps: 2,
             limb_survivors: 0,
             limb_polish: 0,
+            yaw_polish: 0,
+            yaw_polish_deg: 25.0,
             twin_flips: false,
         }
     }
@@ -481,45 +490,11 @@ fn run_seed(seed: u64, k: usize) -> u64 {
 /// A refined survivor: its index among the starts, end state, loss curve, and its evaluation
 /// on all rays when one was made for that state (the polish's ranking), so the final scoring
 /// does not repeat it.
-struct Refined {
-    init: usize,
-    state: HumanState,
-    curve: Vec<f64>,
-    eval: Option<FullEval>,
-}
-
-/// The limb polish of the best `limb_polish` refined hypotheses by the full loss
-/// ([`HumanProblem::limb_polish`]): each replaced when its polish ends lower.
-fn limb_polish(
-    problem: &HumanProblem<'_>,
-    cfg: &HumanConfig,
-    (edge_dist, sample): (&irmirror_capture::Image<f64>, Option<&super::Stratified>),
-    seed: u64,
-    refined: &mut [Option<Refined>],
-) -> Result<(), ReconError> {
-    let t0 = std::time::Instant::now();
-    let mut order: Vec<(usize, f64)> = refined
-        .par_iter()
-        .enumerate()
-        .filter_map(|(i, r)| r.as_ref().map(|r| (i, r)))
-        .map(|(i, r)| Ok((i, problem.full_eval(&r.state, cfg)?.loss)))
-        .collect::<Result<_, ReconError>>()?;
-    order.sort_by(|a, b| a.1.total_cmp(&b.1));
-    order.truncate(cfg.search.limb_polish);
-    let states: Vec<HumanState> = order
-        .iter()
-        .map(|&(i, _)| refined[i].as_ref().expect("live").state.clone())
-        .collect();
-    let better = problem.limb_polish(&states, cfg, edge_dist, sample, seed)?;
-    for ((i, _), b) in order.into_iter().zip(better) {
-        if let (Some(r), Some((state, curve))) = (refined[i].as_mut(), b) {
-            r.state = state;
-            r.curve.extend(curve);
-            r.eval = None;
-        }
-    }
-    tracing::debug!("limb polish: {:.2} s", t0.elapsed().as_secs_f64());
-    Ok(())
+pub(super) struct Refined {
+    pub(super) init: usize,
+    pub(super) state: HumanState,
+    pub(super) curve: Vec<f64>,
+    pub(super) eval: Option<FullEval>,
 }
 
 /// The thermal polish: `polish_iterations` steps on the rise for the best `polish_best` refined
@@ -657,12 +632,21 @@ pub fn fit_human(
         })
         .collect::<Result<_, ReconError>>()?;
     if s.limb_polish > 0 {
-        limb_polish(
+        polish_best(
             problem,
             cfg,
-            (&edge_dist, sample.as_ref()),
-            seed,
+            (s.limb_polish, "limb"),
             &mut refined,
+            |states| problem.limb_polish(states, cfg, &edge_dist, sample.as_ref(), seed),
+        )?;
+    }
+    if s.yaw_polish > 0 {
+        polish_best(
+            problem,
+            cfg,
+            (s.yaw_polish, "yaw"),
+            &mut refined,
+            |states| problem.yaw_polish(states, cfg, (&edge_dist, sample.as_ref()), seed),
         )?;
     }
     if polish > 0 {
