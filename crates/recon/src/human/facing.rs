@@ -204,13 +204,11 @@ impl HumanProblem<'_> {
         let out = survivors
             .into_iter()
             .map(|st| {
-                let bank = banks.at(self, st.height)?;
-                match self.thermal_facing_in(&st, bank, cfg, cfg.facing_top)? {
-                    Some([own, twin]) if twin < own => {
-                        tracing::debug!("facing judge: survivor turned ({own:.4} → {twin:.4})");
-                        self.twin(&st)
-                    }
-                    _ => Ok(st),
+                if self.judge_turns(&st, &mut banks, cfg)? == Some(true) {
+                    tracing::debug!("facing judge: survivor turned");
+                    self.twin(&st)
+                } else {
+                    Ok(st)
                 }
             })
             .collect::<Result<_, ReconError>>()?;
@@ -231,10 +229,9 @@ impl HumanProblem<'_> {
         }
         let mut banks = Banks::default();
         for i in 0..scored.len() {
-            let bank = banks.at(self, scored[i].1.height)?;
-            match self.thermal_facing_in(&scored[i].1, bank, cfg, cfg.facing_top)? {
-                Some([own, twin]) if twin < own => continue,
-                Some(_) => {
+            match self.judge_turns(&scored[i].1, &mut banks, cfg)? {
+                Some(true) => continue,
+                Some(false) => {
                     if i > 0 {
                         tracing::debug!("facing judge: hypothesis {i} ranked first");
                         let h = scored.remove(i);
@@ -246,5 +243,34 @@ impl HumanProblem<'_> {
             }
         }
         Ok(())
+    }
+
+    /// Whether the thermal judge turns `st` to its twin (`None`: no judge — no radiometric
+    /// observations or no view of the mask). It abstains (keeps `st`) where the twin faces
+    /// less than `facing_min_turn_deg` away from `st`: a person seen side-on along the
+    /// objects→person line has a twin facing nearly the same way, and front and back are not
+    /// what the two differ in.
+    fn judge_turns(
+        &self,
+        st: &HumanState,
+        banks: &mut Banks,
+        cfg: &RetrievalConfig,
+    ) -> Result<Option<bool>, ReconError> {
+        if cfg.facing_min_turn_deg > 0.0 {
+            let up = self.up.normalize();
+            let facing = |s: &HumanState| {
+                let f = -(s.rotation * Vector3::y());
+                (f - up * up.dot(&f)).try_normalize(1e-9)
+            };
+            if let (Some(a), Some(b)) = (facing(st), facing(&self.twin(st)?))
+                && a.dot(&b).clamp(-1.0, 1.0).acos().to_degrees() < cfg.facing_min_turn_deg
+            {
+                return Ok(Some(false));
+            }
+        }
+        let bank = banks.at(self, st.height)?;
+        Ok(self
+            .thermal_facing_in(st, bank, cfg, cfg.facing_top)?
+            .map(|[own, twin]| twin < own))
     }
 }

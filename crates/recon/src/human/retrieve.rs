@@ -56,13 +56,21 @@ pub struct RetrievalConfig {
     /// refined hypotheses ranked with the best by loss the judge does not turn first. Off: on 24
     /// held-out bowls the fits turned ≥ 120° fall 5 → 3 and the root median 0.148 → 0.097 m,
     /// but facing within 30° stays 13, per-vertex −0.011 ± 0.033 m (paired), and stage 2
-    /// takes several times as long (README, "Twenty-fourth run").
+    /// takes several times as long (README, "Twenty-fourth run"); on 12 held-out cars, where
+    /// the judge picks the true facing at the truth on 8 and on the fits' hypotheses on 14 of
+    /// 25, facing within 30° 9 → 4 (README, "Twenty-fifth run").
     pub facing: bool,
     /// The judge compares the best of this many outline-ranked poses per facing.
     pub facing_top: usize,
     /// With `facing` on, the judge turns the search's survivors too (off: it ranks the
-    /// refined hypotheses only — the survivors' front/back flips are refined either way).
+    /// refined hypotheses only — the survivors' front/back flips are refined either way; on
+    /// 24 held-out bowls facing within 30° 14 (13 with the survivors turned), but root median
+    /// 0.151 m (0.097) and per-vertex −0.004 ± 0.029 m against no judge: the survivors' turn
+    /// is where its gain comes from; README, "Twenty-fifth run").
     pub facing_survivors: bool,
+    /// The judge abstains (keeps a state) where its silhouette twin faces less than this many
+    /// degrees away from it (0: it always judges).
+    pub facing_min_turn_deg: f64,
 }
 
 impl Default for RetrievalConfig {
@@ -79,6 +87,7 @@ impl Default for RetrievalConfig {
             facing: false,
             facing_top: 30,
             facing_survivors: true,
+            facing_min_turn_deg: 0.0,
         }
     }
 }
@@ -104,6 +113,12 @@ impl RetrievalConfig {
             return Err(ReconError::Config(format!(
                 "[human.retrieval] shift_m = {}: must be a finite number ≥ 0 (m)",
                 self.shift_m
+            )));
+        }
+        if !(0.0..=180.0).contains(&self.facing_min_turn_deg) {
+            return Err(ReconError::Config(format!(
+                "[human.retrieval] facing_min_turn_deg = {}: must lie in 0–180 (degrees)",
+                self.facing_min_turn_deg
             )));
         }
         if side(self) > 1000 {
@@ -683,6 +698,13 @@ mod tests {
                     ..Default::default()
                 },
                 "cells a side",
+            ),
+            (
+                RetrievalConfig {
+                    facing_min_turn_deg: f64::NAN,
+                    ..Default::default()
+                },
+                "facing_min_turn_deg",
             ),
         ] {
             let e = cfg.check().unwrap_err().to_string();
