@@ -69,7 +69,9 @@ pub struct RetrievalConfig {
     /// is where its gain comes from; README, "Twenty-fifth run").
     pub facing_survivors: bool,
     /// The judge abstains (keeps a state) where its silhouette twin faces less than this many
-    /// degrees away from it (0: it always judges).
+    /// degrees away from it (0: it always judges). At 120 on 12 held-out cars facing within
+    /// 30° 4 → 7 of 12 (none: 9), and on 24 bowls the judge's gain gone (README,
+    /// "Twenty-fifth run").
     pub facing_min_turn_deg: f64,
 }
 
@@ -269,8 +271,15 @@ impl Distances {
             y0: y0 as i32,
             w: w as i32,
             h: h as i32,
-            to_sil: distance_to(&crop, w, h),
-            to_out: distance_to(&outside, w, h),
+            // Truncated once here: the shifts' loop reads each cell many times.
+            to_sil: distance_to(&crop, w, h)
+                .into_iter()
+                .map(|d| d.min(cap))
+                .collect(),
+            to_out: distance_to(&outside, w, h)
+                .into_iter()
+                .map(|d| d.min(cap))
+                .collect(),
             cap,
         }
     }
@@ -283,62 +292,12 @@ impl Distances {
 
     /// Distance to the silhouette, truncated (a cell beyond the window: `cap`).
     fn to_sil(&self, x: i32, y: i32) -> f64 {
-        self.index(x, y)
-            .map_or(self.cap, |i| self.to_sil[i].min(self.cap))
+        self.index(x, y).map_or(self.cap, |i| self.to_sil[i])
     }
 
     /// Distance to the silhouette's outside, truncated (a cell beyond the window: 0).
     fn to_out(&self, x: i32, y: i32) -> f64 {
-        self.index(x, y)
-            .map_or(0.0, |i| self.to_out[i].min(self.cap))
-    }
-}
-
-/// Calls `f(triangle, cell)` for every raster cell of `view` whose centre a projected triangle
-/// of the mesh (`faces` on `vertices`) covers. With `front_only`, only the triangles whose
-/// projection winds one way: the body's mesh is closed (every edge shared by two triangles of
-/// opposite winding), so the first surface along each line of sight through its silhouette
-/// already covers it — the same silhouette from half the triangles.
-fn cover(
-    faces: &[[u32; 3]],
-    vertices: &[Vector3<f64>],
-    view: &View,
-    (cfg, front_only): (&RetrievalConfig, bool),
-    mut f: impl FnMut(usize, usize),
-) {
-    let n = side(cfg);
-    let projected: Vec<Option<(f64, f64)>> =
-        vertices.iter().map(|v| view.project(v, cfg)).collect();
-    for (t, face) in faces.iter().enumerate() {
-        let [Some(a), Some(b), Some(c)] = face.map(|i| projected[i as usize]) else {
-            continue;
-        };
-        let lo = |x: f64, y: f64, z: f64| (x.min(y).min(z) - 0.5).ceil().max(0.0) as usize;
-        let hi =
-            |x: f64, y: f64, z: f64| ((x.max(y).max(z) - 0.5).floor() as i64).min(n as i64 - 1);
-        let (x0, x1) = (lo(a.0, b.0, c.0), hi(a.0, b.0, c.0));
-        let (y0, y1) = (lo(a.1, b.1, c.1), hi(a.1, b.1, c.1));
-        if x1 < 0 || y1 < 0 {
-            continue;
-        }
-        let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
-        if area.abs() < 1e-12 || (front_only && area > 0.0) {
-            continue;
-        }
-        let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
-            ((q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)) * area.signum()
-        };
-        for y in y0..=y1 as usize {
-            for x in x0..=x1 as usize {
-                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                if edge(a, b, px, py) >= 0.0
-                    && edge(b, c, px, py) >= 0.0
-                    && edge(c, a, px, py) >= 0.0
-                {
-                    f(t, y * n + x);
-                }
-            }
-        }
+        self.index(x, y).map_or(0.0, |i| self.to_out[i])
     }
 }
 
@@ -415,13 +374,7 @@ impl HumanProblem<'_> {
     ) -> Vec<bool> {
         let n = side(cfg);
         let mut sil = vec![false; n * n];
-        cover(
-            &self.model.asset.faces,
-            vertices,
-            view,
-            (cfg, true),
-            |_, cell| sil[cell] = true,
-        );
+        self.cover(vertices, view, cfg, |_, cell| sil[cell] = true);
         sil
     }
 
@@ -432,9 +385,42 @@ impl HumanProblem<'_> {
         vertices: &[Vector3<f64>],
         view: &View,
         cfg: &RetrievalConfig,
-        f: impl FnMut(usize, usize),
+        mut f: impl FnMut(usize, usize),
     ) {
-        cover(&self.model.asset.faces, vertices, view, (cfg, false), f);
+        let n = side(cfg);
+        let projected: Vec<Option<(f64, f64)>> =
+            vertices.iter().map(|v| view.project(v, cfg)).collect();
+        for (t, face) in self.model.asset.faces.iter().enumerate() {
+            let [Some(a), Some(b), Some(c)] = face.map(|i| projected[i as usize]) else {
+                continue;
+            };
+            let lo = |x: f64, y: f64, z: f64| (x.min(y).min(z) - 0.5).ceil().max(0.0) as usize;
+            let hi =
+                |x: f64, y: f64, z: f64| ((x.max(y).max(z) - 0.5).floor() as i64).min(n as i64 - 1);
+            let (x0, x1) = (lo(a.0, b.0, c.0), hi(a.0, b.0, c.0));
+            let (y0, y1) = (lo(a.1, b.1, c.1), hi(a.1, b.1, c.1));
+            if x1 < 0 || y1 < 0 {
+                continue;
+            }
+            let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
+                ((q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)) * area.signum()
+            };
+            for y in y0..=y1 as usize {
+                for x in x0..=x1 as usize {
+                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                    if edge(a, b, px, py) >= 0.0
+                        && edge(b, c, px, py) >= 0.0
+                        && edge(c, a, px, py) >= 0.0
+                    {
+                        f(t, y * n + x);
+                    }
+                }
+            }
+        }
     }
 
     /// The retrieval score of body `vertices` (depth frame) in `views` (module docs): per view,
@@ -766,68 +752,5 @@ mod tests {
         }
         let none = Distances::new(&vec![false; n * n], n, cap);
         assert_eq!((none.to_sil(3, 4), none.to_out(3, 4)), (cap, 0.0));
-    }
-
-    /// The culled silhouette ([`cover`] with `front_only`) is the whole mesh's, cell for cell,
-    /// for bodies whose arms and legs cross in front of the torso, from the front and the side
-    /// — while it rasterises about half the triangles.
-    #[test]
-    fn the_front_triangles_cast_the_whole_silhouette() {
-        use irmirror_body::prior::generator::PoseGenerator;
-        let model = irmirror_body::BodyModel::builtin().expect("body");
-        let shaped = model
-            .shaped_phenotype::<f64>(&irmirror_body::Phenotype::default())
-            .expect("shape");
-        let generator = PoseGenerator::new(&model);
-        let mut rng = irmirror_geom::rng::seeded(3, 0);
-        let cfg = RetrievalConfig::default();
-        let n = side(&cfg);
-        for name in ["sit", "wave", "squat"] {
-            let rotvecs = generator.template(name, &mut rng).expect("template");
-            let body = model
-                .pose(
-                    &shaped,
-                    &irmirror_body::Pose::from_axis_angles(&rotvecs, Vector3::zeros()),
-                )
-                .expect("pose");
-            for axis in [Vector3::new(0.0, 1.0, 0.0), Vector3::new(0.8, 0.6, 0.0)] {
-                let up = Vector3::z();
-                let e_v = (up - axis * axis.dot(&up)).normalize();
-                let view = View {
-                    centre: -axis * 1.2,
-                    axis,
-                    e_u: e_v.cross(&axis),
-                    e_v,
-                    root: Vector3::zeros(),
-                    mask: Vec::new(),
-                    mask_ray: Vec::new(),
-                    empty: Vec::new(),
-                };
-                let (mut all, mut front) = (vec![false; n * n], vec![false; n * n]);
-                let (mut tris_all, mut tris_front) = (
-                    std::collections::HashSet::new(),
-                    std::collections::HashSet::new(),
-                );
-                let faces = &model.asset.faces;
-                cover(faces, &body.vertices, &view, (&cfg, false), |t, c| {
-                    all[c] = true;
-                    tris_all.insert(t);
-                });
-                cover(faces, &body.vertices, &view, (&cfg, true), |t, c| {
-                    front[c] = true;
-                    tris_front.insert(t);
-                });
-                let cells = all.iter().filter(|c| **c).count();
-                assert!(cells > 500, "{name}: {cells} cells");
-                let differ = all.iter().zip(&front).filter(|(a, b)| a != b).count();
-                assert_eq!(differ, 0, "{name}, axis {axis:?}: cells of {cells} differ");
-                assert!(
-                    tris_front.len() * 10 < tris_all.len() * 7,
-                    "{name}: {} of {} triangles",
-                    tris_front.len(),
-                    tris_all.len()
-                );
-            }
-        }
     }
 }
