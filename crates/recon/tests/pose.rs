@@ -256,32 +256,53 @@ fn the_twin_is_the_body_reflected_across_the_line() {
 /// the legs does not tell the kick.)
 #[test]
 fn the_limb_polish_betters_a_refined_fit() {
-    use irmirror_recon::human::*;
     with_posed(false, &composite_pose(), |problem, start, angle| {
-        let cfg = HumanConfig::default();
-        let edge = edge_distance(problem.mask);
-        let sample = problem.refine_sample(&cfg, 0);
-        let (refined, _) = problem
-            .refine(start, &cfg, &edge, sample.as_ref(), 0)
-            .unwrap()
-            .expect("refined");
-        let (polished, _) = problem
-            .limb_polish(
-                std::slice::from_ref(&refined),
-                &cfg,
-                &edge,
-                sample.as_ref(),
-                0,
-            )
-            .unwrap()
-            .remove(0)
-            .expect("the polish ends lower");
-        let loss = |st: &HumanState| problem.full_eval(st, &cfg).unwrap().loss;
-        let (l0, l1) = (loss(&refined), loss(&polished));
-        let (a0, a1) = (angle(&refined), angle(&polished));
-        eprintln!("refined {l0:.3} {a0:.3?} → polished {l1:.3} {a1:.3?}");
+        let ((l0, a0), (l1, a1)) =
+            refine_then_polish(problem, start, angle, |refined, cfg, (edge, sample)| {
+                problem
+                    .limb_polish(std::slice::from_ref(refined), cfg, edge, sample, 0)
+                    .unwrap()
+            });
         assert!(l1 < l0 && a1.1 < a0.1, "{l0} {a0:?} → {l1} {a1:?}");
     });
+}
+
+/// A refined state and its polish: each one's full loss and distance to the truth.
+type BeforeAfter = ((f64, (f64, f64)), (f64, (f64, f64)));
+
+/// `start` refined as the fit refines a survivor (default settings, batch seed 0), then
+/// handed to `polish` (with the settings, edge distances and batch), which must end lower.
+fn refine_then_polish(
+    problem: &irmirror_recon::human::HumanProblem<'_>,
+    start: &irmirror_recon::human::HumanState,
+    angle: &dyn Fn(&irmirror_recon::human::HumanState) -> (f64, f64),
+    polish: impl FnOnce(
+        &irmirror_recon::human::HumanState,
+        &irmirror_recon::human::HumanConfig,
+        (
+            &irmirror_capture::Image<f64>,
+            Option<&irmirror_recon::human::Stratified>,
+        ),
+    ) -> Vec<Option<(irmirror_recon::human::HumanState, Vec<f64>)>>,
+) -> BeforeAfter {
+    use irmirror_recon::human::*;
+    let cfg = HumanConfig::default();
+    let edge = edge_distance(problem.mask);
+    let sample = problem.refine_sample(&cfg, 0);
+    let (refined, _) = problem
+        .refine(start, &cfg, &edge, sample.as_ref(), 0)
+        .unwrap()
+        .expect("refined");
+    let (polished, _) = polish(&refined, &cfg, (&edge, sample.as_ref()))
+        .remove(0)
+        .expect("the polish ends lower");
+    let loss = |st: &HumanState| problem.full_eval(st, &cfg).unwrap().loss;
+    let (before, after) = (
+        (loss(&refined), angle(&refined)),
+        (loss(&polished), angle(&polished)),
+    );
+    eprintln!("refined {before:.3?} → polished {after:.3?}");
+    (before, after)
 }
 
 /// Parts of three poses: the kick's legs, a wave's arms, a look's head.
@@ -773,29 +794,14 @@ fn exact_truth(
 /// 0.212 → 0.206 but 32° → 53° — in the wrong pose, a turned body explains the outline best.)
 #[test]
 fn the_yaw_polish_leaves_a_wrong_yaw() {
-    use irmirror_recon::human::*;
     with_posed(true, &kick(), |problem, start, angle| {
-        let cfg = HumanConfig::default();
-        let edge = edge_distance(problem.mask);
-        let sample = problem.refine_sample(&cfg, 0);
-        let (refined, _) = problem
-            .refine(&problem.yawed(start, 30.0), &cfg, &edge, sample.as_ref(), 0)
-            .unwrap()
-            .expect("refined");
-        let (polished, _) = problem
-            .yaw_polish(
-                std::slice::from_ref(&refined),
-                &cfg,
-                (&edge, sample.as_ref()),
-                0,
-            )
-            .unwrap()
-            .remove(0)
-            .expect("the polish ends lower");
-        let loss = |st: &HumanState| problem.full_eval(st, &cfg).unwrap().loss;
-        let (l0, l1) = (loss(&refined), loss(&polished));
-        let (a0, a1) = (angle(&refined), angle(&polished));
-        eprintln!("refined {l0:.3} {a0:.3?} → polished {l1:.3} {a1:.3?}");
+        let turned = problem.yawed(start, 30.0);
+        let ((l0, a0), (l1, a1)) =
+            refine_then_polish(problem, &turned, angle, |refined, cfg, polish_with| {
+                problem
+                    .yaw_polish(std::slice::from_ref(refined), cfg, polish_with, 0)
+                    .unwrap()
+            });
         assert!(
             l1 < l0 - 0.05 && a1.1 < a0.1 - 0.05,
             "{l0} {a0:?} → {l1} {a1:?}"
