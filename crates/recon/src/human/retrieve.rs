@@ -450,7 +450,6 @@ impl HumanProblem<'_> {
         let reach = (cfg.shift_m / cfg.cell_m / f64::from(step)).round() as i32;
         let cap = cfg.truncate_m / cfg.cell_m;
         let dist = Distances::new(&self.silhouette(vertices, view, cfg), n, cap);
-        let on_raster = |x: i32, y: i32| x >= 0 && y >= 0 && x < n as i32 && y < n as i32;
         // Only the rays outside the mask that some shift brings into the window can spill.
         let r = reach * step;
         let near: Vec<(i32, i32)> = view
@@ -467,30 +466,13 @@ impl HumanProblem<'_> {
         let mut best = (f64::INFINITY, (0, 0));
         for du in (-reach..=reach).map(|k| k * step) {
             for dv in (-reach..=reach).map(|k| k * step) {
-                // Off the raster: no body there.
+                // The window lies on the raster: off it, no body is there.
                 let miss: f64 = view
                     .mask
                     .iter()
-                    .map(|&(x, y)| {
-                        let (x, y) = (x + du, y + dv);
-                        if on_raster(x, y) {
-                            dist.to_sil(x, y)
-                        } else {
-                            cap
-                        }
-                    })
+                    .map(|&(x, y)| dist.to_sil(x + du, y + dv))
                     .sum();
-                let spill: f64 = near
-                    .iter()
-                    .map(|&(x, y)| {
-                        let (x, y) = (x + du, y + dv);
-                        if on_raster(x, y) {
-                            dist.to_out(x, y)
-                        } else {
-                            0.0
-                        }
-                    })
-                    .sum();
+                let spill: f64 = near.iter().map(|&(x, y)| dist.to_out(x + du, y + dv)).sum();
                 if miss + spill < best.0 {
                     best = (miss + spill, (du, dv));
                 }
