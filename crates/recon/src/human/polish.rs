@@ -105,3 +105,21 @@ impl HumanProblem<'_> {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `--config` turn the polish cannot take (negative or not a number) is refused by
+    /// name; the default is accepted.
+    #[test]
+    fn a_bad_yaw_turn_is_refused() {
+        assert!(HumanConfig::default().check().is_ok());
+        for bad in [-5.0, f64::NAN, f64::INFINITY] {
+            let mut cfg = HumanConfig::default();
+            cfg.search.yaw_polish_deg = bad;
+            let e = cfg.check().unwrap_err().to_string();
+            assert!(e.contains("search.yaw_polish_deg"), "{e}");
+        }
+    }
+}

@@ -1,6 +1,7 @@
-//! Helpers shared by the stage-2 test binaries (`human`, `pose`, `radiometric`): the body model and
-//! prior, simulated car and tabletop captures with the true objects' reflected rays, and the
-//! stage-2 problem on them. Each binary uses a subset.
+//! Helpers shared by the stage-2 test binaries (`human`, `pose`, `polish`, `radiometric`): the
+//! body model and prior, simulated car and tabletop captures with the true objects' reflected
+//! rays, the stage-2 problem on them, and a person posed as the prior decodes a pose
+//! (`with_posed`). Each binary uses a subset.
 #![allow(dead_code)]
 
 use irmirror_body::BodyModel;
@@ -253,4 +254,98 @@ pub fn thermal_preprocessed(
         Some(sc.ambient_c + irmirror_capture::planck::ZERO_C_K),
         sc.sensor.blur_px,
     )
+}
+
+/// Parts of three poses: the kick's legs, a wave's arms, a look's head.
+pub fn composite_pose() -> Vec<[f64; 3]> {
+    let generator = irmirror_body::prior::generator::PoseGenerator::new(model());
+    let mut rng = irmirror_geom::rng::seeded(5, 1);
+    let wave = generator.template("wave", &mut rng).unwrap();
+    let look = generator.template("look", &mut rng).unwrap();
+    let names = &model().asset.meta.bone_names;
+    let mut pose = kick();
+    for (j, name) in names.iter().enumerate() {
+        if name.contains("arm")
+            || name.contains("wrist")
+            || name.contains("clavicle")
+            || name.contains("shoulder")
+        {
+            pose[j] = wave[j];
+        } else if name.starts_with("neck") || name == "head" {
+            pose[j] = look[j];
+        }
+    }
+    pose
+}
+
+/// A kick from the prior's real training poses.
+pub fn kick() -> Vec<[f64; 3]> {
+    let set = irmirror_body::mocap::MocapSet::prior_training().unwrap();
+    let kicks: Vec<usize> = (0..set.poses.len())
+        .filter(|&i| set.sources[i].contains("kick") && !set.sources[i].contains("spin"))
+        .collect();
+    set.poses[kicks[kicks.len() / 2]].clone()
+}
+
+/// Car (`is_car`; else tabletop) seed 1 (Boson) with the person in `pose` as the prior decodes its encoding (so the
+/// latent can state it; the mean adult), through its true objects and mask, the floor known:
+/// runs `f` on the problem, the start (the true root and facing, the search's "stand" pose)
+/// and a state's distance to the truth: the mean angle (degrees) between its decoded body
+/// joints and the truth's, and its body's mean per-vertex distance to the true body (m).
+pub fn with_posed(
+    is_car: bool,
+    pose: &[[f64; 3]],
+    f: impl FnOnce(
+        &irmirror_recon::human::HumanProblem<'_>,
+        &irmirror_recon::human::HumanState,
+        &dyn Fn(&irmirror_recon::human::HumanState) -> (f64, f64),
+    ),
+) {
+    use irmirror_geom::rotation::axis_angle_to_matrix;
+    use irmirror_recon::human::*;
+    use irmirror_sim::scene::ThermalPreset;
+    let mut sc = scene_with(1, is_car, ThermalPreset::Boson);
+    sc.person.phenotype = irmirror_body::Phenotype::default();
+    let latent = prior().encode(pose).unwrap();
+    for (j, r) in prior().decode(&latent).unwrap().iter().enumerate().skip(1) {
+        sc.person.rotvec_rad[j] = irmirror_geom::rotation::matrix_to_axis_angle(r).into();
+    }
+    let sim = irmirror_sim::simulate(model(), &sc, 1).unwrap();
+    let rays = true_object_rays(&sc, &sim);
+    let (r0, up) = true_root(&sc, &sim);
+    let problem = floored_problem(&sim, &rays, up);
+    let generator = irmirror_body::prior::generator::PoseGenerator::new(model());
+    let mut rng = irmirror_geom::rng::seeded(0, 1);
+    let stand = generator.template("stand", &mut rng).unwrap();
+    let start = HumanState {
+        translation: sim.body.joints[0],
+        rotation: r0,
+        height: HEIGHT_MEAN,
+        build: Default::default(),
+        latent: prior().encode(&stand).unwrap(),
+        residual: Vec::new(),
+    };
+    let angle = |st: &HumanState| {
+        let truth = sc.person.rotvec_rad[1..]
+            .iter()
+            .map(|r| axis_angle_to_matrix(&Vector3::from(*r)));
+        let decoded = prior().decode(&st.latent).unwrap();
+        let sum: f64 = decoded[1..]
+            .iter()
+            .zip(truth)
+            .map(|(a, b)| ((a.transpose() * b).trace() - 1.0).clamp(-2.0, 2.0) / 2.0)
+            .map(|c| c.acos().to_degrees())
+            .sum();
+        let mean_angle = sum / (decoded.len() - 1) as f64;
+        let body = posed_body(model(), prior(), st).unwrap();
+        let vertex_m = body
+            .vertices
+            .iter()
+            .zip(&sim.body.mesh.vertices)
+            .map(|(a, b)| (a - Vector3::from(b.map(f64::from))).norm())
+            .sum::<f64>()
+            / body.vertices.len() as f64;
+        (mean_angle, vertex_m)
+    };
+    f(&problem, &start, &angle);
 }
