@@ -445,13 +445,25 @@ mod tests {
         // against the fitted ones: the two where the oracle ran and the full model did not fail.
         assert!(t.contains("| tabletop-mug | 2 | "), "{t}");
         let oracle = t
-            .split("true objects − fitted objects")
+            .split("2-D keypoints, true objects − fitted objects")
             .nth(1)
             .unwrap_or("");
         assert!(
             oracle.contains("| tabletop-mug | 2 | 2 of 2 | 2 of 2 | 1 / 1 |"),
             "{t}"
         );
+        // Each ablation against the full model on the two captures where both ran: equal
+        // evaluations, so every paired difference is 0.
+        for name in ["w/o edge sampling", "w/o sphere tracing", "w/o smoothing"] {
+            let paired = t
+                .split(&format!("2-D keypoints, {name} − full, mean |"))
+                .nth(1)
+                .unwrap_or("");
+            assert!(
+                paired.contains("| 0.000 ± 0.000 | 0.000 ± 0.000 |\n"),
+                "{name}: {t}"
+            );
+        }
         // Hypotheses: both diagnosed fits face 170° off, so no right-facing hypothesis.
         assert!(t.contains("| 0 of 2 | – (n = 0) |"), "{t}");
         assert!(!t.contains("| car |"), "rows without captures are left out");

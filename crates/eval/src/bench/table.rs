@@ -109,6 +109,7 @@ pub fn markdown_table(r: &Report) -> String {
     s.push_str(&diagnosis_table(r));
     s.push_str(&hypotheses_table(r));
     s.push_str(&radiometric_table(r));
+    s.push_str(&ablations_table(r));
     s.push_str(&true_objects_table(r));
     s.push_str(&paired_table(
         r,
@@ -354,6 +355,21 @@ pub fn radiometric_table(r: &Report) -> String {
     )
 }
 
+/// Each of the other ablations (edge sampling, sphere tracing, smoothing) against the full
+/// model on the captures where both ran: Table 1's ablation columns run on a subset, so
+/// their means are over other captures than the full model's; the paired differences say
+/// whether an ablation is worse (issue 25 item 4).
+pub fn ablations_table(r: &Report) -> String {
+    [
+        (Variant::NoEdgeSampling, "w/o edge sampling"),
+        (Variant::NoSphereTracing, "w/o sphere tracing"),
+        (Variant::NoSmoothing, "w/o smoothing"),
+    ]
+    .into_iter()
+    .map(|ablated| paired_table(r, ablated, (Variant::Full, "full")))
+    .collect()
+}
+
 /// Stage 2 through the simulator's objects against stage 1's (`--variants full,true-objects`):
 /// what a perfect mirror would give the person, on the same captures.
 pub fn true_objects_table(r: &Report) -> String {
@@ -366,10 +382,11 @@ pub fn true_objects_table(r: &Report) -> String {
 
 /// Two variants on the same captures (those where both ran; empty when none): the
 /// best-by-loss hypothesis' facing within 30°, successes (within 15 cm and 30°), root and
-/// per-vertex medians, and the paired per-vertex difference (a − b) with its 95 % interval.
+/// per-vertex medians, and the paired per-vertex and 2-D keypoint differences (a − b), each
+/// the mean with its 95 % interval.
 fn paired_table(r: &Report, (a, a_name): (Variant, &str), (b, b_name): (Variant, &str)) -> String {
     let mut s = format!(
-        "\n| cell | n (both ran) | facing within 30°, {a_name} | facing within 30°, {b_name} | within 15 cm and 30°, {a_name} / {b_name} | root error median (m), {a_name} / {b_name} | per-vertex error median (m), {a_name} / {b_name} | per-vertex error, {a_name} − {b_name}, mean (m) |\n|---|---|---|---|---|---|---|---|\n",
+        "\n| cell | n (both ran) | facing within 30°, {a_name} | facing within 30°, {b_name} | within 15 cm and 30°, {a_name} / {b_name} | root error median (m), {a_name} / {b_name} | per-vertex error median (m), {a_name} / {b_name} | per-vertex error, {a_name} − {b_name}, mean (m) | 2-D keypoints, {a_name} − {b_name}, mean |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut any = false;
     for c in Cell::ALL {
@@ -398,13 +415,17 @@ fn paired_table(r: &Report, (a, a_name): (Variant, &str), (b, b_name): (Variant,
         let col = |v: &[&Evaluation], f: fn(&Evaluation) -> Option<f64>| {
             median(&v.iter().filter_map(|e| f(e)).collect::<Vec<_>>())
         };
-        let diff: Vec<f64> = pairs
-            .iter()
-            .filter_map(|(x, y)| Some(x.vertex_error_m? - y.vertex_error_m?))
-            .collect();
+        let diff = |f: fn(&Evaluation) -> Option<f64>| -> Vec<f64> {
+            pairs
+                .iter()
+                .filter_map(|(x, y)| Some(f(x)? - f(y)?))
+                .collect()
+        };
+        let vertex = diff(|e| e.vertex_error_m);
+        let keypoints = diff(|e| e.keypoints_2d_normalised);
         let n = pairs.len();
         s.push_str(&format!(
-            "| {c} | {n} | {} of {n} | {} of {n} | {} / {} | {} / {} | {} / {} | {} |\n",
+            "| {c} | {n} | {} of {n} | {} of {n} | {} / {} | {} / {} | {} / {} | {} | {} |\n",
             facing(&va),
             facing(&vb),
             success(&va),
@@ -413,7 +434,8 @@ fn paired_table(r: &Report, (a, a_name): (Variant, &str), (b, b_name): (Variant,
             col(&vb, |e| Some(e.root_error_m)),
             col(&va, |e| e.vertex_error_m),
             col(&vb, |e| e.vertex_error_m),
-            cell(&diff, diff.len()),
+            cell(&vertex, vertex.len()),
+            cell(&keypoints, keypoints.len()),
         ));
     }
     if any { s } else { String::new() }
