@@ -114,11 +114,11 @@ impl Shape {
     }
 }
 
-fn capped_cylinder(p: &Vector3<f64>, radius: f64, y0: f64, y1: f64) -> f64 {
-    let d = Vector2::new(
-        Vector2::new(p.x, p.z).norm() - radius,
-        (p.y - 0.5 * (y0 + y1)).abs() - 0.5 * (y1 - y0),
-    );
+/// Signed distance to the solid cylinder about +Y of `radius` between heights `y0` and `y1`, at
+/// the point `(rho, y)` — `rho` its distance from the axis, which coaxial cylinders share.
+#[inline]
+fn capped_cylinder_at(rho: f64, y: f64, radius: f64, y0: f64, y1: f64) -> f64 {
+    let d = Vector2::new(rho - radius, (y - 0.5 * (y0 + y1)).abs() - 0.5 * (y1 - y0));
     d.x.max(d.y).min(0.0) + Vector2::new(d.x.max(0.0), d.y.max(0.0)).norm()
 }
 
@@ -137,8 +137,9 @@ impl Mug {
     /// Signed distance to the cup alone (the mug without its handle).
     pub fn cup_distance(&self, p: &Vector3<f64>) -> f64 {
         let h = self.half_height;
-        let outer = capped_cylinder(p, self.radius, -h, h);
-        let cavity = capped_cylinder(p, self.radius - self.wall, -h + self.wall, h + 1.0);
+        let rho = Vector2::new(p.x, p.z).norm();
+        let outer = capped_cylinder_at(rho, p.y, self.radius, -h, h);
+        let cavity = capped_cylinder_at(rho, p.y, self.radius - self.wall, -h + self.wall, h + 1.0);
         outer.max(-cavity)
     }
 }
@@ -147,12 +148,17 @@ impl Sdf for Mug {
     fn distance(&self, p: &Vector3<f64>) -> f64 {
         let h = self.half_height;
         let shell = self.cup_distance(p);
-        // Handle: a torus in the XY plane beside the wall, clipped to outside the wall.
+        // Handle: a torus in the XY plane beside the wall, clipped to outside the wall. The clip
+        // bounds it from below, so where the clip alone is no nearer than the cup the minimum
+        // is the cup's (most points: the mug's other side), without the torus.
+        let clip = self.radius - 0.5 * self.wall - p.x;
+        if clip >= shell {
+            return shell;
+        }
         let c = Vector2::new(self.radius, 0.0);
         let big = 0.45 * h;
         let q = Vector2::new((Vector2::new(p.x, p.y) - c).norm() - big, p.z);
-        let handle =
-            (q.norm() - 0.35 * self.wall.max(0.05)).max(self.radius - 0.5 * self.wall - p.x);
+        let handle = (q.norm() - 0.35 * self.wall.max(0.05)).max(clip);
         shell.min(handle)
     }
     fn bounding_radius(&self) -> f64 {
@@ -286,5 +292,58 @@ mod tests {
         assert!(m.distance(&Vector3::new(0.0, 0.0, 0.0)) > 0.3, "cavity");
         assert!(m.distance(&Vector3::new(0.0, -0.49, 0.0)) < 0.0, "bottom");
         assert!(m.distance(&Vector3::new(0.0, 0.6, 0.0)) > 0.0, "open top");
+    }
+
+    /// The mug's distance skips the handle's torus where the cup is nearer than the handle's
+    /// clip plane: the same value, to the bit, as the union written out in full, in and around
+    /// mugs of every shape the fit draws (handle side, far side, inside, on the surface).
+    #[test]
+    fn mug_distance_equals_the_full_union() {
+        use rand::{Rng, SeedableRng};
+        let full = |m: &Mug, p: &Vector3<f64>| {
+            let h = m.half_height;
+            let rho = Vector2::new(p.x, p.z).norm();
+            let cyl = |radius: f64, y0: f64, y1: f64| {
+                let d = Vector2::new(
+                    rho - radius,
+                    (p.y - 0.5 * (y0 + y1)).abs() - 0.5 * (y1 - y0),
+                );
+                d.x.max(d.y).min(0.0) + Vector2::new(d.x.max(0.0), d.y.max(0.0)).norm()
+            };
+            let shell = cyl(m.radius, -h, h).max(-cyl(m.radius - m.wall, -h + m.wall, h + 1.0));
+            let c = Vector2::new(m.radius, 0.0);
+            let q = Vector2::new((Vector2::new(p.x, p.y) - c).norm() - 0.45 * h, p.z);
+            let handle = (q.norm() - 0.35 * m.wall.max(0.05)).max(m.radius - 0.5 * m.wall - p.x);
+            shell.min(handle)
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let (mut skipped, mut torus) = (0, 0);
+        for _ in 0..40 {
+            let m = Shape::Mug {
+                aspect: rng.random_range(0.6..1.8),
+                wall: rng.random_range(0.04..0.3),
+            }
+            .mug()
+            .unwrap();
+            for _ in 0..500 {
+                let p = Vector3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                ) * if rng.random_bool(0.5) { 1.0 } else { 0.6 };
+                let (a, b) = (m.distance(&p), full(&m, &p));
+                assert_eq!(a.to_bits(), b.to_bits(), "{m:?} at {p:?}: {a} vs {b}");
+                if m.radius - 0.5 * m.wall - p.x >= m.cup_distance(&p) {
+                    skipped += 1;
+                } else {
+                    torus += 1;
+                }
+            }
+        }
+        // Both branches are exercised.
+        assert!(
+            skipped > 1000 && torus > 1000,
+            "{skipped} skipped, {torus} with the torus"
+        );
     }
 }
