@@ -151,6 +151,33 @@ impl Sdf for Bowl {
         };
         d - self.half_thickness
     }
+    /// Analytic: from the rim circle where the rim is nearer, else along the radius of the
+    /// shell's sphere; one evaluation instead of central differences' six.
+    fn gradient(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        let w = self.rim_radius();
+        let rho = Vector2::new(p.x, p.z).norm();
+        let q = Vector2::new(rho, p.y);
+        let g = if self.cut_height * q.x < w * q.y {
+            let e = q - Vector2::new(w, self.cut_height);
+            let n = e.norm();
+            if n > 0.0 { e / n } else { Vector2::zeros() }
+        } else {
+            let n = q.norm();
+            let s = if n >= self.radius { 1.0 } else { -1.0 };
+            if n > 0.0 {
+                q * (s / n)
+            } else {
+                Vector2::zeros()
+            }
+        };
+        // ∂ρ/∂(x, z); none on the axis (central differences give 0 there too).
+        let (ax, az) = if rho > 0.0 {
+            (p.x / rho, p.z / rho)
+        } else {
+            (0.0, 0.0)
+        };
+        Vector3::new(g.x * ax, g.y, g.x * az)
+    }
     fn bounding_radius(&self) -> f64 {
         self.radius + self.half_thickness
     }

@@ -183,11 +183,11 @@ impl Sdf for Mug {
     fn gradient(&self, p: &Vector3<f64>) -> Vector3<f64> {
         let h = self.half_height;
         let rho = Vector2::new(p.x, p.z).norm();
-        // ∂ρ/∂(x, z); on the axis any horizontal direction (ρ has no gradient there).
+        // ∂ρ/∂(x, z); none on the axis (central differences give 0 there too).
         let (ax, az) = if rho > 0.0 {
             (p.x / rho, p.z / rho)
         } else {
-            (1.0, 0.0)
+            (0.0, 0.0)
         };
         let cyl = |(gr, gy): (f64, f64)| Vector3::new(gr * ax, gy, gr * az);
         let outer = capped_cylinder_at(rho, p.y, self.radius, -h, h);
