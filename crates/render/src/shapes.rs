@@ -356,12 +356,34 @@ mod tests {
         assert!(m.distance(&Vector3::new(0.0, 0.6, 0.0)) > 0.0, "open top");
     }
 
+    /// Calls `f` at 500 uniform points in the unit cube about each of 40 mugs of the shapes the
+    /// fit draws (random aspect and wall), with the generator for any further draws.
+    fn for_random_mug_points(
+        seed: u64,
+        mut f: impl FnMut(&Mug, Vector3<f64>, &mut rand_chacha::ChaCha8Rng),
+    ) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        for _ in 0..40 {
+            let m = Shape::Mug {
+                aspect: rng.random_range(0.6..1.8),
+                wall: rng.random_range(0.04..0.3),
+            }
+            .mug()
+            .unwrap();
+            for _ in 0..500 {
+                let p = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+                f(&m, p, &mut rng);
+            }
+        }
+    }
+
     /// The mug's distance skips the handle's torus where the cup is nearer than the handle's
     /// clip plane: the same value, to the bit, as the union written out in full, in and around
     /// mugs of every shape the fit draws (handle side, far side, inside, on the surface).
     #[test]
     fn mug_distance_equals_the_full_union() {
-        use rand::{Rng, SeedableRng};
+        use rand::Rng;
         let full = |m: &Mug, p: &Vector3<f64>| {
             let h = m.half_height;
             let rho = Vector2::new(p.x, p.z).norm();
@@ -378,30 +400,17 @@ mod tests {
             let handle = (q.norm() - 0.35 * m.wall.max(0.05)).max(m.radius - 0.5 * m.wall - p.x);
             shell.min(handle)
         };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let (mut skipped, mut torus) = (0, 0);
-        for _ in 0..40 {
-            let m = Shape::Mug {
-                aspect: rng.random_range(0.6..1.8),
-                wall: rng.random_range(0.04..0.3),
+        for_random_mug_points(3, |m, p, rng| {
+            let p = p * if rng.random_bool(0.5) { 1.0 } else { 0.6 };
+            let (a, b) = (m.distance(&p), full(m, &p));
+            assert_eq!(a.to_bits(), b.to_bits(), "{m:?} at {p:?}: {a} vs {b}");
+            if m.radius - 0.5 * m.wall - p.x >= m.cup_distance(&p) {
+                skipped += 1;
+            } else {
+                torus += 1;
             }
-            .mug()
-            .unwrap();
-            for _ in 0..500 {
-                let p = Vector3::new(
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                ) * if rng.random_bool(0.5) { 1.0 } else { 0.6 };
-                let (a, b) = (m.distance(&p), full(&m, &p));
-                assert_eq!(a.to_bits(), b.to_bits(), "{m:?} at {p:?}: {a} vs {b}");
-                if m.radius - 0.5 * m.wall - p.x >= m.cup_distance(&p) {
-                    skipped += 1;
-                } else {
-                    torus += 1;
-                }
-            }
-        }
+        });
         // Both branches are exercised.
         assert!(
             skipped > 1000 && torus > 1000,
@@ -414,7 +423,7 @@ mod tests {
     /// average two sides), near the surface and away from it; and it has unit length there.
     #[test]
     fn mug_gradient_matches_central_differences() {
-        use rand::{Rng, SeedableRng};
+        use rand::Rng;
         let fd = |m: &Mug, p: &Vector3<f64>, h: f64| {
             Vector3::from_fn(|k, _| {
                 let mut e = Vector3::zeros();
@@ -422,42 +431,28 @@ mod tests {
                 (m.distance(&(p + e)) - m.distance(&(p - e))) / (2.0 * h)
             })
         };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let (mut smooth, mut creased) = (0, 0);
-        for _ in 0..40 {
-            let m = Shape::Mug {
-                aspect: rng.random_range(0.6..1.8),
-                wall: rng.random_range(0.04..0.3),
-            }
-            .mug()
-            .unwrap();
-            for _ in 0..500 {
-                let mut p = Vector3::new(
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                );
-                if rng.random_bool(0.5) {
-                    // Onto the surface, where the fit's points lie.
-                    for _ in 0..4 {
-                        p -= fd(&m, &p, 1e-6) * m.distance(&p);
-                    }
+        for_random_mug_points(5, |m, mut p, rng| {
+            if rng.random_bool(0.5) {
+                // Onto the surface, where the fit's points lie.
+                for _ in 0..4 {
+                    p -= fd(m, &p, 1e-6) * m.distance(&p);
                 }
-                let (a, b) = (fd(&m, &p, 1e-5), fd(&m, &p, 1e-6));
-                if (a - b).norm() > 1e-7 {
-                    creased += 1;
-                    continue;
-                }
-                smooth += 1;
-                let g = m.gradient(&p);
-                assert!((g - b).norm() < 1e-6, "{m:?} at {p:?}: {g:?} vs {b:?}");
-                assert!(
-                    (g.norm() - 1.0).abs() < 1e-9,
-                    "{m:?} at {p:?}: |g| = {}",
-                    g.norm()
-                );
             }
-        }
+            let (a, b) = (fd(m, &p, 1e-5), fd(m, &p, 1e-6));
+            if (a - b).norm() > 1e-7 {
+                creased += 1;
+                return;
+            }
+            smooth += 1;
+            let g = m.gradient(&p);
+            assert!((g - b).norm() < 1e-6, "{m:?} at {p:?}: {g:?} vs {b:?}");
+            assert!(
+                (g.norm() - 1.0).abs() < 1e-9,
+                "{m:?} at {p:?}: |g| = {}",
+                g.norm()
+            );
+        });
         // Most points count (the rest lie within a step of a rim, wall end or the handle's
         // clip, where half the points projected onto the surface gather).
         assert!(
