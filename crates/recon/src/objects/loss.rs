@@ -362,7 +362,8 @@ impl Problem<'_> {
             (s * dq * inv, q, dq)
         };
         // …and its pose derivatives times `f` (see `loss`), only when a Jacobian is asked for:
-        // the SDF gradient costs six distance evaluations, and most free points are outside.
+        // a shape without its own gradient takes six distance evaluations for it, and most free
+        // points are outside.
         let scaled = |(a, b, c): (Vector3<f64>, Vector3<f64>, f64), f: f64| (a * f, b * f, c * f);
         let point_grad = |p: &Vector3<f64>, q: &Vector3<f64>, dq: f64, f: f64| {
             let gq = sdf.gradient(q);
