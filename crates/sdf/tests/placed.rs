@@ -3,7 +3,7 @@
 use irmirror_geom::Similarity3;
 use irmirror_geom::rotation::axis_angle_to_matrix;
 use irmirror_sdf::placed::{
-    PlacedFitConfig, PlacedObservation, PlacementOffset, fit_placed, loss_and_gradient,
+    PlacedFitConfig, PlacedObservation, PlacementOffset, best_start, fit_placed, loss_and_gradient,
 };
 use irmirror_sdf::{Category, FamilyShape, SdfNet};
 use nalgebra::Vector3;
@@ -287,4 +287,45 @@ fn placed_fit_refuses_bad_input_clearly() {
     assert!(msg(obs(&good, 0.0), &z).contains("must be positive"));
     assert!(msg(obs(&good, 0.1), &z[..3]).contains("latent of length 3"));
     assert!(fit_placed(&net, &obs(&good, 0.1), &init, &z, &cfg).is_ok());
+}
+
+/// The start screening picks the training code whose own surface was observed, among the mean
+/// latent and the first 16 codes, wherever that code sits in the list; no candidates, or one of
+/// the wrong length, is an error.
+#[test]
+fn best_start_finds_the_observed_training_shape() {
+    let net = prior(Category::Bowl);
+    let place = Similarity3 {
+        rotation: axis_angle_to_matrix(&Vector3::new(-1.7, 0.2, 0.1)),
+        translation: Vector3::new(0.03, 0.02, 0.5),
+        scale: 0.08,
+    };
+    let mut candidates = vec![net.mean_latent()];
+    candidates.extend(net.train_latents.iter().take(16).cloned());
+    for k in [3, 11] {
+        let z = &net.train_latents[k];
+        let mesh = irmirror_sdf::quality::extract_mesh(&net, z, 32).unwrap();
+        let (mut surface, mut free) = (Vec::new(), Vec::new());
+        for v in mesh.vertices.iter().step_by(2) {
+            let q = Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+            let n = net.eval_full(z, &q).2.normalize();
+            surface.push(place.transform_point(&q));
+            free.push(place.transform_point(&(q + n * 0.05)));
+        }
+        let obs = PlacedObservation {
+            surface: &surface,
+            free: &free,
+            inside: &[],
+            support: &[],
+            up: None,
+            unit_m: 0.08,
+            scale_prior: None,
+        };
+        let cfg = PlacedFitConfig::default();
+        let best = best_start(&net, &obs, &place, &candidates, &cfg).unwrap();
+        assert_eq!(best, k + 1, "code {k}: picked candidate {best}");
+        assert!(best_start(&net, &obs, &place, &[], &cfg).is_err());
+        let short = vec![candidates[0].clone(), vec![0.0; 3]];
+        assert!(best_start(&net, &obs, &place, &short, &cfg).is_err());
+    }
 }

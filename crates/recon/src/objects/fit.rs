@@ -480,16 +480,16 @@ pub fn fit_learned(
         unit_m: unit,
         scale_prior,
     };
-    let placed = fit_placed(
-        &net,
-        &observation,
-        &init,
-        &net.mean_latent(),
-        &PlacedFitConfig {
-            seed,
-            ..cfg.learned
-        },
-    )?;
+    let placed_cfg = PlacedFitConfig {
+        seed,
+        ..cfg.learned
+    };
+    // The start: the prior's mean latent or, with `latent_starts`, whichever of it and the
+    // training codes scores lowest where the family fit put the shape.
+    let mut starts = vec![net.mean_latent()];
+    starts.extend(net.train_latents.iter().take(cfg.latent_starts).cloned());
+    let start = irmirror_sdf::placed::best_start(&net, &observation, &init, &starts, &placed_cfg)?;
+    let placed = fit_placed(&net, &observation, &init, &starts[start], &placed_cfg)?;
     let field = Arc::new(net.shape(&placed.latent)?);
     let mesh = irmirror_sdf::quality::extract_mesh(&net, &placed.latent, 40)?
         .main_components(irmirror_sdf::quality::MAIN_PART_FRACTION);

@@ -120,6 +120,9 @@ pub struct ObjectConfig {
     pub prior: ObjectPrior,
     /// The learned prior's fit (latent and placement together, from the family fit).
     pub learned: PlacedFitConfig,
+    /// Training codes of the learned prior screened, with its mean latent, for the fit's start
+    /// (`irmirror_sdf::placed::best_start`; 0: the mean latent alone).
+    pub latent_starts: usize,
 }
 
 /// The shape prior stage 1 fits.
@@ -155,6 +158,7 @@ impl Default for ObjectConfig {
             depth_rays: 200,
             prior: ObjectPrior::Simple,
             learned: PlacedFitConfig::default(),
+            latent_starts: 64,
         }
     }
 }
