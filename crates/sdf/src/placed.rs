@@ -328,15 +328,7 @@ pub fn fit_placed(
     };
     let schedule = CosineDecay { floor: 0.05 };
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 13);
-    let draw = |pts: &[Vector3<f64>], rng: &mut irmirror_geom::rng::Rng| -> Vec<Vector3<f64>> {
-        if pts.len() <= cfg.batch {
-            pts.to_vec()
-        } else {
-            (0..cfg.batch)
-                .map(|_| pts[rng.random_range(0..pts.len())])
-                .collect()
-        }
-    };
+    let draw = |pts: &[Vector3<f64>], rng: &mut irmirror_geom::rng::Rng| draw(pts, cfg.batch, rng);
     let total = cfg.latent_steps + cfg.steps;
     let mut curve = Vec::with_capacity(total);
     let mut step_buf = vec![0.0; l];
@@ -395,6 +387,21 @@ pub fn fit_placed(
     })
 }
 
+/// `batch` points drawn from `pts` with replacement, or all of them when there are no more.
+fn draw(
+    pts: &[Vector3<f64>],
+    batch: usize,
+    rng: &mut irmirror_geom::rng::Rng,
+) -> Vec<Vector3<f64>> {
+    if pts.len() <= batch {
+        pts.to_vec()
+    } else {
+        (0..batch)
+            .map(|_| pts[rng.random_range(0..pts.len())])
+            .collect()
+    }
+}
+
 /// Of `candidates` (latents, e.g. the prior's mean and its training codes), the index of the one
 /// whose shape at `init` scores the lowest loss on one draw of `cfg.batch` points of each set
 /// (value only, no gradient; stream 14 of `cfg.seed`, so the fit's own draws are unchanged).
@@ -423,15 +430,7 @@ pub fn best_start(
     }
     let split = SharedLatentNet::<f32>::new(net);
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 14);
-    let mut draw = |pts: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
-        if pts.len() <= cfg.batch {
-            pts.to_vec()
-        } else {
-            (0..cfg.batch)
-                .map(|_| pts[rng.random_range(0..pts.len())])
-                .collect()
-        }
-    };
+    let mut draw = |pts: &[Vector3<f64>]| draw(pts, cfg.batch, &mut rng);
     let (surface, free, inside) = (draw(obs.surface), draw(obs.free), draw(obs.inside));
     let sets = [&surface[..], &free[..], &inside[..], obs.support];
     let losses: Vec<f64> = candidates
