@@ -415,7 +415,7 @@ pub const BAKE_CELLS: usize = 96;
 pub const BAND_CELLS: usize = 48;
 
 /// The learned prior's fit from a family fit (`fit`): the family shape's bounding box gives
-/// the prior's normalised frame (centre, half-diagonal 0.9), the mean latent the shape; then
+/// the prior's normalised frame (centre, half-diagonal 0.9), the screened start the shape; then
 /// latent and placement are fitted together, with a grid just below the support plane under the
 /// footprint kept outside (when a plane was found). Spheres are returned unchanged.
 pub fn fit_learned(
