@@ -318,14 +318,7 @@ pub fn fit_placed(
         .zip(&rates)
         .map(|(&n, &r)| vec![r; n])
         .collect();
-    let mut state = HandState {
-        r0: init.rotation,
-        t0: init.translation,
-        s0: init.scale,
-        z: latent.to_vec(),
-        tau: Vector3::zeros(),
-        log_s: 0.0,
-    };
+    let mut state = HandState::at(init, latent);
     let schedule = CosineDecay { floor: 0.05 };
     let mut rng = irmirror_geom::rng::seeded(cfg.seed, 13);
     let draw = |pts: &[Vector3<f64>], rng: &mut irmirror_geom::rng::Rng| draw(pts, cfg.batch, rng);
@@ -435,17 +428,7 @@ pub fn best_start(
     let sets = [&surface[..], &free[..], &inside[..], obs.support];
     let losses: Vec<f64> = candidates
         .iter()
-        .map(|z| {
-            let st = HandState {
-                r0: init.rotation,
-                t0: init.translation,
-                s0: init.scale,
-                z: z.clone(),
-                tau: Vector3::zeros(),
-                log_s: 0.0,
-            };
-            hand_loss(&split, obs, cfg, &st, sets, false).0
-        })
+        .map(|z| hand_loss(&split, obs, cfg, &HandState::at(init, z), sets, false).0)
         .collect();
     Ok((0..losses.len())
         .min_by(|&a, &b| losses[a].total_cmp(&losses[b]))
@@ -461,6 +444,20 @@ struct HandState {
     z: Vec<f64>,
     tau: Vector3<f64>,
     log_s: f64,
+}
+
+impl HandState {
+    /// The start: `init`'s placement, no offset, latent `z`.
+    fn at(init: &Similarity3<f64>, z: &[f64]) -> Self {
+        Self {
+            r0: init.rotation,
+            t0: init.translation,
+            s0: init.scale,
+            z: z.to_vec(),
+            tau: Vector3::zeros(),
+            log_s: 0.0,
+        }
+    }
 }
 
 /// The loss [`loss_and_gradient`] computes, at `δ = 0`, on the point sets `[surface, free,
