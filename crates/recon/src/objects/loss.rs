@@ -588,7 +588,11 @@ mod tests {
             .iter()
             .map(|p| p - Vector3::new(0.0, 0.0, 0.01))
             .collect();
-        let obs = ObjectObservation { surface, free };
+        let obs = ObjectObservation {
+            surface,
+            free,
+            ..Default::default()
+        };
         let ground = Ground::plane(crate::plane::Plane {
             normal: Vector3::new(0.1, -0.9, -0.3).normalize().into(),
             offset_m: -0.2,

@@ -57,6 +57,7 @@ mod family;
 mod fit;
 mod loss;
 mod observation;
+mod silhouette;
 mod stage;
 
 pub use family::Family;
@@ -110,6 +111,10 @@ pub struct ObjectConfig {
     /// 2 of 9 tuning-set mugs ≥ 40 % off in wall, scale +17–24 %; with 8 none over 9 %; 16
     /// samples too sparsely).
     pub ring_px: u32,
+    /// The run kept is the one with the fewest outline errors (mask pixels its rendered outline
+    /// misses, ring pixels it stands in front of) among the runs within this fraction of the
+    /// lowest loss; 0 keeps the lowest loss.
+    pub outline_tolerance: f64,
     /// Weight of the category size prior (per σ², see `Family::size_prior`).
     pub w_size: f64,
     /// Weight of the rendered-depth term (sphere-traced depth against the measured depth).
@@ -153,6 +158,7 @@ impl Default for ObjectConfig {
             w_free: 1.0,
             w_plane: 0.3,
             ring_px: 8,
+            outline_tolerance: 0.1,
             w_size: 1e-3,
             w_depth: 0.3,
             depth_rays: 200,

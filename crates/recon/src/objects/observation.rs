@@ -2,6 +2,7 @@
 //! of them and along the rays of a ring of pixels around the mask.
 
 use super::ObjectConfig;
+use super::silhouette::{SilhouetteRay, silhouette_rays};
 use crate::ReconError;
 use crate::morphology::dilate;
 use irmirror_capture::Image;
@@ -16,6 +17,9 @@ pub struct ObjectObservation {
     /// Points that must be outside the object (in front of the surface, or on rays that saw past
     /// it).
     pub free: Vec<Vector3<f64>>,
+    /// Every mask and ring pixel's camera ray, for the fits' outlines
+    /// ([`super::silhouette::outline_errors`]).
+    pub silhouette: Vec<SilhouetteRay>,
 }
 
 /// Lifts a depth-pixel mask to the observation of one object.
@@ -76,7 +80,12 @@ pub fn observe(
             }
         }
     }
-    Ok(ObjectObservation { surface, free })
+    let silhouette = silhouette_rays(depth_m, camera, mask, &ring);
+    Ok(ObjectObservation {
+        surface,
+        free,
+        silhouette,
+    })
 }
 
 /// Free-space samples along each ring ray (dense enough not to fall through a thin wall into a
