@@ -513,7 +513,8 @@ fn the_refinement_descends_its_batch_from_the_truth() {
 /// The refinement's edge-focused batch estimates every ray's sums without bias (its
 /// importance weights undo the focus: over 20 draws the non-mask stratum's weights average to
 /// its size within 3 %; the mask's stratum, smaller than its share, is taken whole) and holds
-/// more rays near the mask's edge than the uniform batch does.
+/// more rays near the mask's edge than the uniform batch does; a batch as large as the capture
+/// is complete (every pixel's ray at weight 1), a smaller one not.
 #[test]
 fn the_focused_batch_is_unbiased_and_near_the_edge() {
     use irmirror_recon::human::*;
@@ -564,6 +565,13 @@ fn the_focused_batch_is_unbiased_and_near_the_edge() {
     );
     assert!(n_pos < 2000.0, "the mask stratum fits its share ({n_pos})");
     assert!(near(&focused) > 2 * near(&uniform));
+    // A batch that subsamples is not complete; one as large as the capture holds every
+    // pixel's ray at weight 1 (where the refinement takes the curriculum as weights).
+    assert!(!focused.complete && !uniform.complete);
+    let whole = problem.focused_batch(2 * all.len(), 1, false, Some((0.9, 1.5)));
+    assert!(whole.complete);
+    assert!(whole.weight.iter().all(|&w| w == 1.0));
+    assert_eq!(whole.rays.len(), problem.pixels_with_rays().1);
 }
 
 /// The residual's prior weighs against the reflection's size: on a reflection of `n` pixels

@@ -169,6 +169,21 @@ impl EdgeSampler {
     }
 }
 
+/// Edge sampling's curriculum as weights: `base_i · ((1 − α) + α exp(−e_i/τ))` (`base` 1
+/// where `None`), what a draw with those probabilities weighs each ray by in expectation.
+pub fn curriculum_weights(
+    base: Option<&[f64]>,
+    edge_px: &[f64],
+    alpha: f64,
+    tau: f64,
+    out: &mut Vec<f64>,
+) {
+    out.clear();
+    out.extend(edge_px.iter().enumerate().map(|(i, e)| {
+        base.map_or(1.0, |w| w[i]) * ((1.0 - alpha) + alpha * (-e / tau.max(1e-9)).exp())
+    }));
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -232,5 +247,26 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The curriculum's weights: the base weights at α = 0; at α = 0.9, τ = 1.5 px an edge ray
+    /// keeps its base weight, one far from the edge a tenth of it, one 1.5 px out 0.1 + 0.9/e;
+    /// a missing base counts as 1.
+    #[test]
+    fn curriculum_weights_follow_the_edge_schedule() {
+        let (base, edge) = ([2.0, 3.0, 4.0], [0.0, 1.5, 100.0]);
+        let mut w = Vec::new();
+        curriculum_weights(Some(&base), &edge, 0.0, 1.5, &mut w);
+        assert_eq!(w, base);
+        curriculum_weights(Some(&base), &edge, 0.9, 1.5, &mut w);
+        let expect = [2.0, 3.0 * (0.1 + 0.9 / std::f64::consts::E), 0.4];
+        for (a, b) in w.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-12, "{w:?}");
+        }
+        curriculum_weights(None, &edge, 0.9, 1.5, &mut w);
+        assert!(
+            (w[0] - 1.0).abs() < 1e-12 && (w[2] - 0.1).abs() < 1e-12,
+            "{w:?}"
+        );
     }
 }

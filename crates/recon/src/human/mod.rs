@@ -218,6 +218,17 @@ impl HumanConfig {
         }
     }
 
+    /// Edge sampling's weight α and length τ (pixels) at `progress` ∈ [0, 1] of a run: α from
+    /// 0 to `edge_mix`, τ from `edge_tau_px[0]` to `edge_tau_px[1]`; (0, 1) with it off.
+    pub fn edge_schedule(&self, progress: f64) -> (f64, f64) {
+        if self.edge_sampling {
+            let [t0, t1] = self.edge_tau_px;
+            (self.edge_mix * progress, t0 + (t1 - t0) * progress)
+        } else {
+            (0.0, 1.0)
+        }
+    }
+
     /// The fixed-batch refinement's settings: the learning rates scaled by `refine_lr_scale`.
     pub fn refinement(&self) -> HumanConfig {
         self.lr_scaled(self.refine_lr_scale)

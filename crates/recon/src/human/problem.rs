@@ -1,6 +1,6 @@
 //! The stage-2 loss and its gradient, and one hypothesis' Adam run.
 
-use super::edge::EdgeSampler;
+use super::edge::{EdgeSampler, curriculum_weights};
 use super::{Batch, HumanConfig, HumanProblem, HumanState, ROOT_PARAMS, Tangent};
 use crate::ReconError;
 use irmirror_body::Pose;
@@ -494,8 +494,9 @@ impl HumanProblem<'_> {
                 ),
                 self.targets(),
             )),
-            Draw::Fixed(_) => None,
+            Draw::Fixed(_) | Draw::FixedEdge(..) => None,
         };
+        let mut curriculum = Vec::new();
         let (mut sub, mut target, mut idx) = (ReflectedRays::default(), Vec::new(), Vec::new());
         let (mut drawn, mut selection) = (Vec::new(), Selection::default());
         let mut curve = Vec::with_capacity(cfg.iterations);
@@ -520,17 +521,18 @@ impl HumanProblem<'_> {
                     sigma_m2: sigma,
                     ..fixed
                 },
+                Draw::FixedEdge(fixed, edge_px) => {
+                    let (alpha, tau) = cfg.edge_schedule(progress);
+                    curriculum_weights(fixed.weight, edge_px, alpha, tau, &mut curriculum);
+                    Batch {
+                        weight: Some(&curriculum),
+                        sigma_m2: sigma,
+                        ..fixed
+                    }
+                }
                 Draw::Edge(edge_dist) => {
                     // Draw the rays (weighted sampling without replacement, `EdgeSampler`).
-                    let (alpha, tau) = if cfg.edge_sampling {
-                        (
-                            cfg.edge_mix * progress,
-                            cfg.edge_tau_px[0]
-                                + (cfg.edge_tau_px[1] - cfg.edge_tau_px[0]) * progress,
-                        )
-                    } else {
-                        (0.0, 1.0)
-                    };
+                    let (alpha, tau) = cfg.edge_schedule(progress);
                     if let Some((sampler, target_all)) = edge.as_mut() {
                         match rad {
                             None if active_on => {
@@ -636,6 +638,11 @@ pub enum Draw<'a> {
     Edge(&'a Image<f64>),
     /// The same (weighted) batch every step; its σ is replaced by the schedule's.
     Fixed(Batch<'a>),
+    /// The same batch every step, its mask weights multiplied by edge sampling's curriculum
+    /// at that step ([`curriculum_weights`]; per ray, the pixel distance to the mask's edge):
+    /// a fixed batch that holds every ray of a small capture draws nothing, so without these
+    /// weights edge sampling would leave its loss as it is.
+    FixedEdge(Batch<'a>, &'a [f64]),
 }
 
 /// No triangle hit (the ray passes the body).
