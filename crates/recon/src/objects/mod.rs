@@ -158,7 +158,7 @@ impl Default for ObjectConfig {
             w_free: 1.0,
             w_plane: 0.3,
             ring_px: 8,
-            outline_tolerance: 0.1,
+            outline_tolerance: 0.25,
             w_size: 1e-3,
             w_depth: 0.3,
             depth_rays: 200,
