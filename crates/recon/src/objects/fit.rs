@@ -332,11 +332,12 @@ fn pick_run(
     let near: Vec<usize> = (0..runs.len())
         .filter(|&k| runs[k].1 <= best * (1.0 + tolerance.max(0.0)))
         .collect();
+    let count = tolerance > 0.0 && near.len() > 1;
     let scored: Vec<(usize, usize)> = near
         .par_iter()
         .map(|&k| {
             let st = &runs[k].0;
-            let errors = if tolerance > 0.0 && near.len() > 1 {
+            let errors = if count {
                 // A ring ray may meet the fit this far in front of the seen surface: a few
                 // depth-noise widths at the mugs' 0.4–0.6 m.
                 outline_errors(
@@ -613,8 +614,11 @@ mod tests {
             .map(|i| {
                 let dir = Vector3::new((i % 160) as f64 - 79.5, (i / 160) as f64 - 59.5, 400.0)
                     .normalize();
-                let hit =
-                    crate::objects::loss::render_depth(&*sdf, &camera, &sim.rotation.tr_mul(&dir));
+                let hit = crate::objects::silhouette::render_depth(
+                    &*sdf,
+                    &camera,
+                    &sim.rotation.tr_mul(&dir),
+                );
                 SilhouetteRay {
                     dir,
                     seen_m: Some(hit.map_or(1.0 / dir.z, |t| t * sim.scale)),

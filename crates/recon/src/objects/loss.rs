@@ -8,10 +8,10 @@
 use super::ObjectConfig;
 use super::family::Family;
 use super::observation::ObjectObservation;
+use super::silhouette::render_depth;
 use crate::plane::Ground;
 use irmirror_geom::Similarity3;
 use irmirror_render::sdf::Sdf;
-use irmirror_render::sphere_trace::march;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::Arc;
 
@@ -480,13 +480,6 @@ struct Hit {
 /// Rays meeting the surface at a normal-incidence cosine below this are not rendered.
 const GRAZING_COS: f64 = 0.2;
 
-/// Sphere-traces the unit ray `d` from `o` (both in the object frame) into `sdf`: the hit
-/// distance (object units), or `None` on a miss. Marches to 1e-7 object units (a depth error
-/// far below the sensor's), 200 steps at most.
-pub(super) fn render_depth(sdf: &dyn Sdf, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
-    march(sdf, o, d, 1e-7, 200)
-}
-
 /// Huber of `e` with width `width` (quadratic inside, L1 beyond): value and derivative.
 fn huber(e: f64, width: f64) -> (f64, f64) {
     if e.abs() <= width {
@@ -511,48 +504,6 @@ mod tests {
     fn gradients_match_finite_differences() {
         for family in [Family::Mug, Family::Bowl, Family::Car] {
             gradients_for(family);
-        }
-    }
-
-    /// Rendered depth of a placed unit sphere against the closed-form ray–sphere intersection,
-    /// for rays hitting it (centre, off-centre) and missing it.
-    #[test]
-    fn rendered_depth_is_the_ray_sphere_intersection() {
-        let st = State {
-            rotation: axis_angle_to_matrix(&Vector3::new(0.3, -0.2, 0.5)),
-            translation: Vector3::new(0.05, -0.02, 0.8),
-            log_scale: 0.1f64.ln(),
-            u: [0.0; 2],
-        };
-        let sdf = Family::Sphere.shape(&[]).sdf();
-        let s = st.log_scale.exp();
-        let camera = st.rotation.tr_mul(&(-st.translation)) / s;
-        for (k, target) in [
-            Vector3::new(0.05, -0.02, 0.8),
-            Vector3::new(0.12, 0.03, 0.8),
-            Vector3::new(-0.2, 0.0, 0.8),
-        ]
-        .iter()
-        .enumerate()
-        {
-            let ray = target.normalize();
-            let (c, r) = (st.translation, 0.1);
-            let b = ray.dot(&c);
-            let disc = b * b - (c.norm_squared() - r * r);
-            let got = render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&ray));
-            if disc < 0.0 {
-                assert!(
-                    got.is_none(),
-                    "ray {k} misses the sphere but rendered {got:?}"
-                );
-            } else {
-                let t = got.unwrap_or_else(|| panic!("ray {k} hits the sphere")) * s;
-                assert!(
-                    (t - (b - disc.sqrt())).abs() < 1e-7 && ((ray * t - c).norm() - r).abs() < 1e-7,
-                    "ray {k}: t {t}, closed form {}",
-                    b - disc.sqrt()
-                );
-            }
         }
     }
 

@@ -1,13 +1,21 @@
-//! The fitted object's rendered outline against its mask: every mask pixel's and every ring
-//! pixel's camera ray traced into a fit. The loss sees the ring only through a few fixed samples
-//! along a subsample of its rays, which a thin part (a mug's 1 cm handle tube, a shallow bowl's
-//! rim) can fall between; the count of pixels a fit's outline gets wrong does not.
+//! A fit's rendered depth along one camera ray, and its rendered outline against its mask:
+//! every mask pixel's and every ring pixel's camera ray traced into a fit. The loss sees the
+//! ring only through a few fixed samples along a subsample of its rays, which a thin part (a
+//! mug's 1 cm handle tube, a shallow bowl's rim) can fall between; the count of pixels a fit's
+//! outline gets wrong does not.
 
-use super::loss::render_depth;
 use irmirror_capture::Image;
 use irmirror_geom::{PinholeCamera, Similarity3};
 use irmirror_render::sdf::Sdf;
+use irmirror_render::sphere_trace::march;
 use nalgebra::Vector3;
+
+/// Sphere-traces the unit ray `d` from `o` (both in the object frame) into `sdf`: the hit
+/// distance (object units), or `None` on a miss. Marches to 1e-7 object units (a depth error
+/// far below the sensor's), 200 steps at most.
+pub(super) fn render_depth(sdf: &dyn Sdf, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    march(sdf, o, d, 1e-7, 200)
+}
 
 /// One depth pixel's camera ray (depth frame, from the camera's centre).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,7 +85,52 @@ pub fn outline_errors(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::objects::Family;
+    use crate::objects::loss::State;
+    use irmirror_geom::rotation::axis_angle_to_matrix;
     use irmirror_render::sdf::Sphere;
+
+    /// Rendered depth of a placed unit sphere against the closed-form ray–sphere intersection,
+    /// for rays hitting it (centre, off-centre) and missing it.
+    #[test]
+    fn rendered_depth_is_the_ray_sphere_intersection() {
+        let st = State {
+            rotation: axis_angle_to_matrix(&Vector3::new(0.3, -0.2, 0.5)),
+            translation: Vector3::new(0.05, -0.02, 0.8),
+            log_scale: 0.1f64.ln(),
+            u: [0.0; 2],
+        };
+        let sdf = Family::Sphere.shape(&[]).sdf();
+        let s = st.log_scale.exp();
+        let camera = st.rotation.tr_mul(&(-st.translation)) / s;
+        for (k, target) in [
+            Vector3::new(0.05, -0.02, 0.8),
+            Vector3::new(0.12, 0.03, 0.8),
+            Vector3::new(-0.2, 0.0, 0.8),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let ray = target.normalize();
+            let (c, r) = (st.translation, 0.1);
+            let b = ray.dot(&c);
+            let disc = b * b - (c.norm_squared() - r * r);
+            let got = render_depth(sdf.as_ref(), &camera, &st.rotation.tr_mul(&ray));
+            if disc < 0.0 {
+                assert!(
+                    got.is_none(),
+                    "ray {k} misses the sphere but rendered {got:?}"
+                );
+            } else {
+                let t = got.unwrap_or_else(|| panic!("ray {k} hits the sphere")) * s;
+                assert!(
+                    (t - (b - disc.sqrt())).abs() < 1e-7 && ((ray * t - c).norm() - r).abs() < 1e-7,
+                    "ray {k}: t {t}, closed form {}",
+                    b - disc.sqrt()
+                );
+            }
+        }
+    }
 
     /// A unit sphere 1 m ahead, scaled to 0.1 m: a ray through its centre is inside, one 0.2 m
     /// off misses it; a ring ray that meets it in front of a farther surface is an error, one
