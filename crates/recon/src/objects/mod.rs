@@ -57,6 +57,7 @@ mod family;
 mod fit;
 mod loss;
 mod observation;
+mod restart;
 mod silhouette;
 mod stage;
 
