@@ -295,14 +295,6 @@ pub fn fit_family(
         && let Some(mut run) = problem.run(s)
     {
         polish(&mut run);
-        let errors = |st: &State| {
-            outline_errors(
-                &*family.shape(&st.u).sdf(),
-                &st.sim(),
-                &obs.silhouette,
-                OUTLINE_IN_FRONT * st.log_scale.exp(),
-            )
-        };
         let x = run.0.rotation * Vector3::x();
         tracing::debug!(
             "{family:?} hidden handle turned away: loss {:.4e} against {:.4e}, object +X {:.3} {:.3} {:.3}",
@@ -313,7 +305,8 @@ pub fn fit_family(
             x.z
         );
         if run.1 <= runs[k].1 * (1.0 + cfg.outline_tolerance)
-            && errors(&run.0) <= errors(&runs[k].0)
+            && run_outline_errors(family, &run.0, obs)
+                <= run_outline_errors(family, &runs[k].0, obs)
         {
             runs.push(run);
             pick = Some(runs.len() - 1);
@@ -369,14 +362,8 @@ fn pick_run(
     let scored: Vec<(usize, usize)> = near
         .par_iter()
         .map(|&k| {
-            let st = &runs[k].0;
             let errors = if count {
-                outline_errors(
-                    &*family.shape(&st.u).sdf(),
-                    &st.sim(),
-                    &obs.silhouette,
-                    OUTLINE_IN_FRONT * st.log_scale.exp(),
-                )
+                run_outline_errors(family, &runs[k].0, obs)
             } else {
                 0
             };
@@ -403,6 +390,16 @@ fn pick_run(
 /// A ring ray may meet the fit this far in front of the seen surface (object units): a few
 /// depth-noise widths at the mugs' 0.4–0.6 m.
 const OUTLINE_IN_FRONT: f64 = 0.03;
+
+/// [`outline_errors`] of the run at `st`.
+fn run_outline_errors(family: Family, st: &State, obs: &ObjectObservation) -> usize {
+    outline_errors(
+        &*family.shape(&st.u).sdf(),
+        &st.sim(),
+        &obs.silhouette,
+        OUTLINE_IN_FRONT * st.log_scale.exp(),
+    )
+}
 
 /// Points just behind the observed surface along the camera rays (inside any wall): 1.5 % of
 /// the object's size, ≈ 1–1.5 mm on a mug or a bowl, thinner than their walls.
@@ -580,9 +577,7 @@ mod tests {
             silhouette,
             ..Default::default()
         };
-        let errors = |st: &State| {
-            outline_errors(&*sdf, &st.sim(), &obs.silhouette, 0.03 * st.log_scale.exp())
-        };
+        let errors = |st: &State| run_outline_errors(Family::Mug, st, &obs);
         assert_eq!(errors(&truth), 0);
         assert!(errors(&state(PI)) > 20, "{}", errors(&state(PI)));
         let runs = vec![(truth, 1.0, Vec::new()), (state(PI), 0.99, Vec::new())];
