@@ -288,7 +288,7 @@ pub fn fit_family(
     runs.extend(extra_runs);
     let mut pick = pick_run(family, &runs, obs, cfg.outline_tolerance);
     // A hidden handle: the same mug with its handle straight away from the camera, kept when
-    // it fits as well (module docs of `away_restart`).
+    // it fits as well (see `restart::away_restart`).
     if let Some(k) = pick
         && cfg.outline_tolerance > 0.0
         && let Some(s) = away_restart(family, &runs[k].0, obs)
