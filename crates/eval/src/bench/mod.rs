@@ -7,15 +7,16 @@
 //! and orientation, as the paper's HumanEva draw. Writes `table.md` (Table 1 layout, means with
 //! 95 % intervals), `results.json` (per capture), `report.html` (with thumbnails) and `run.toml`.
 
+mod basin;
 mod diagnosis;
 mod run;
 mod table;
 
-pub use diagnosis::{
-    BANK, BasinProbe, BasinStart, Diagnosis, FailureClass, LIMBS, NEAREST_BANK, RETRIEVED,
-    RETRIEVED_TWIN, SUCCESS_FACING_DEG, SUCCESS_ROOT_M, TRUTH_LATENT, TRUTH_TWIN,
-    noisy_truth_scale,
+pub use basin::{
+    BANK, BasinProbe, BasinStart, LIMBS, NEAREST_BANK, RETRIEVED, RETRIEVED_TWIN, TRUTH_LATENT,
+    TRUTH_TWIN, noisy_truth_scale,
 };
+pub use diagnosis::{Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M};
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
 
@@ -338,6 +339,8 @@ mod tests {
             truth_thermal_residuals: None,
             truth_thermal_facing: Some([0.1, 0.2]),
             hypothesis_thermal_facing: Vec::new(),
+            truth_region_rise_k_px: Some([30.0, 10.0, 5.0, 0.0]),
+            best_region_rise_k_px: None,
             class,
             // One start closed, one diverged.
             basin: vec![
@@ -464,6 +467,12 @@ mod tests {
                 "{name}: {t}"
             );
         }
+        // What the reflection shows: the truth's 30 / 10 / 5 / 0 K·px in shares, its face and
+        // bare skin at least a tenth in both; the hypotheses' left unscored.
+        assert!(
+            t.contains("| tabletop-mug | 2 | 66.667 / 22.222 / 11.111 / 0.000 | 2 / 2 of 2 | – / – / – / – |"),
+            "{t}"
+        );
         // Hypotheses: both diagnosed fits face 170° off, so no right-facing hypothesis.
         assert!(t.contains("| 0 of 2 | – (n = 0) |"), "{t}");
         assert!(!t.contains("| car |"), "rows without captures are left out");

@@ -1,7 +1,8 @@
 //! Running the benchmark: simulate each capture, stage 0–1 once, stage 2 per variant, the
 //! Random baseline and the diagnosis, then the report files.
 
-use super::diagnosis::{BasinProbe, diagnose};
+use super::basin::BasinProbe;
+use super::diagnosis::diagnose;
 use super::table::{html, markdown_table};
 use super::{
     BenchProgress, CaptureResult, Planned, RANDOM_DRAWS, Report, Selection, Set, Variant,

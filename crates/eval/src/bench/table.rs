@@ -108,6 +108,7 @@ pub fn markdown_table(r: &Report) -> String {
     }
     s.push_str(&diagnosis_table(r));
     s.push_str(&hypotheses_table(r));
+    s.push_str(&reflection_table(r));
     s.push_str(&radiometric_table(r));
     s.push_str(&ablations_table(r));
     s.push_str(&true_objects_table(r));
@@ -340,6 +341,54 @@ pub fn hypotheses_table(r: &Report) -> String {
             median(&times),
             median(&floor),
             median(&floor_loss),
+        ));
+    }
+    s
+}
+
+/// What the reflection shows of the person, per cell: the shares of the rise the radiometric
+/// model predicts for the true body (and for the best hypothesis) by region, medians, and in
+/// how many captures the truth's face or bare skin carries a tenth of it — the thermal
+/// front/back cue; with clothing alone a body and its outline twin look alike.
+pub fn reflection_table(r: &Report) -> String {
+    let mut s = String::from(
+        "\n| cell | n | the truth's predicted rise by region: clothing / bare skin / face / hair, median share (%) | captures where the truth's face / bare skin is ≥ 10 % of it | the best hypothesis': clothing / bare skin / face / hair (%) |\n|---|---|---|---|---|\n",
+    );
+    let shares = |v: &[f64; 4]| -> Option<[f64; 4]> {
+        let total: f64 = v.iter().sum();
+        (total > 0.0).then(|| v.map(|x| 100.0 * x / total))
+    };
+    let col = |rows: &[[f64; 4]]| -> String {
+        (0..4)
+            .map(|k| median(&rows.iter().map(|x| x[k]).collect::<Vec<_>>()))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    };
+    for c in Cell::ALL {
+        let ds: Vec<&Diagnosis> = of_cell(r, c)
+            .iter()
+            .filter_map(|x| x.diagnosis.as_ref())
+            .collect();
+        let truth: Vec<[f64; 4]> = ds
+            .iter()
+            .filter_map(|d| d.truth_region_rise_k_px.as_ref().and_then(shares))
+            .collect();
+        if truth.is_empty() {
+            continue;
+        }
+        let best: Vec<[f64; 4]> = ds
+            .iter()
+            .filter_map(|d| d.best_region_rise_k_px.as_ref().and_then(shares))
+            .collect();
+        let seen = |k: usize| truth.iter().filter(|x| x[k] >= 10.0).count();
+        s.push_str(&format!(
+            "| {c} | {} | {} | {} / {} of {} | {} |\n",
+            truth.len(),
+            col(&truth),
+            seen(2),
+            seen(1),
+            truth.len(),
+            col(&best),
         ));
     }
     s

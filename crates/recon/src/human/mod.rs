@@ -351,12 +351,17 @@ pub struct FittedRadiometry {
     /// LWIR reflectance per object (stage-1 order).
     pub reflectance: Vec<f64>,
     /// Surface temperature per region, °C.
-    pub temperature_c: RegionTemperatures,
+    pub temperature_c: RegionValues,
+    /// The rise predicted for this body, summed over the pixels per region, K·px
+    /// ([`HumanProblem::region_rise`]): which parts of the body the reflection shows — with
+    /// clothing alone, front and back look alike.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rise_k_px: Option<RegionValues>,
 }
 
-/// One value per body region, °C.
+/// One value per body region.
 #[derive(Clone, Copy, Debug, Serialize)]
-pub struct RegionTemperatures {
+pub struct RegionValues {
     /// Clothing.
     pub clothing: f64,
     /// Bare skin other than the face.
@@ -370,16 +375,24 @@ pub struct RegionTemperatures {
 impl FittedRadiometry {
     /// From the fitted scalars.
     pub fn new(r: &radiometric::Radiometry, s: &radiometric::Scalars) -> Self {
-        let [clothing, skin, face, hair] =
-            irmirror_body::Region::ALL.map(|g| r.temperature_c(g, s.contrast[g.index()]));
         Self {
             reflectance: s.reflectance.clone(),
-            temperature_c: RegionTemperatures {
-                clothing,
-                skin,
-                face,
-                hair,
-            },
+            temperature_c: irmirror_body::Region::ALL
+                .map(|g| r.temperature_c(g, s.contrast[g.index()]))
+                .into(),
+            rise_k_px: None,
+        }
+    }
+}
+
+impl From<[f64; radiometric::REGIONS]> for RegionValues {
+    /// From `Region::ALL`'s order.
+    fn from([clothing, skin, face, hair]: [f64; radiometric::REGIONS]) -> Self {
+        Self {
+            clothing,
+            skin,
+            face,
+            hair,
         }
     }
 }

@@ -339,6 +339,26 @@ impl HumanProblem<'_> {
         ))
     }
 
+    /// The rise the radiometric model predicts for a body mesh (its scalars fitted there),
+    /// summed over the pixels per region, K·px (`Region::ALL`'s order): which parts of the
+    /// body the reflection shows — a face, bare forearms, or clothing alone, where front and
+    /// back look alike. `None` when that data term is off.
+    pub fn region_rise(
+        &self,
+        vertices: &[Vector3<f64>],
+        cfg: &HumanConfig,
+    ) -> Option<[f64; REGIONS]> {
+        let rad = self.radiometric(cfg)?;
+        let (_, _, s, (meet, occ)) = self.mesh_eval(vertices, cfg);
+        let input = TermInput {
+            occ: &occ,
+            mix: &meet.mix,
+            rise: rad.rise(),
+            share: 1.0,
+        };
+        Some(rad.region_rise(&input, &s?))
+    }
+
     /// A body mesh (the model's topology) on every ray at the final σ: the data term, the soft
     /// IoU, the radiometric scalars, and where each ray met the body with its occupancy.
     fn mesh_eval(

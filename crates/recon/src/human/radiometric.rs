@@ -489,6 +489,21 @@ impl Radiometry {
         (0..input.pixels()).map(|p| s.reflectance[input.object(p)] * input.covered(p, &s.contrast))
     }
 
+    /// [`Self::predict`] summed over `input`'s pixels per region, K·px: the parts add up to
+    /// the whole prediction.
+    pub fn region_rise(&self, input: &TermInput<'_>, s: &Scalars) -> [f64; REGIONS] {
+        let mut out = [0.0; REGIONS];
+        for p in 0..input.pixels() {
+            let g = s.reflectance[input.object(p)];
+            for (r, o) in out.iter_mut().enumerate() {
+                let mut only = [0.0; REGIONS];
+                only[r] = s.contrast[r];
+                *o += g * input.covered(p, &only);
+            }
+        }
+        out
+    }
+
     /// `D` at fixed scalars; with `grad`, writes `∂D/∂o_i` and `∂D/∂β_i` there (per ray of the
     /// batch).
     pub fn loss(

@@ -309,3 +309,31 @@ fn known_temperatures_recentre_the_regions() {
         );
     }
 }
+
+/// The per-region parts of the prediction add up to it, and each is what that region's
+/// contrast contributes: the whole prediction less the one with that contrast at zero.
+#[test]
+fn region_rise_splits_the_prediction_by_region() {
+    let sy = synthetic(0.02);
+    let t = sy.input(&sy.occ, &sy.region, &sy.rad.rise_k, None, 1.0);
+    let s = &sy.truth;
+    let total = |s: &Scalars| sy.rad.predict(&t, s).sum::<f64>();
+    let parts = sy.rad.region_rise(&t, s);
+    let whole = total(s);
+    assert!(whole > 1.0, "{whole}");
+    assert!((parts.iter().sum::<f64>() - whole).abs() < 1e-9 * whole);
+    for r in 0..REGIONS {
+        let mut without = s.clone();
+        without.contrast[r] = 0.0;
+        let want = whole - total(&without);
+        assert!(
+            want > 1e-3 * whole,
+            "region {r} unseen in the synthetic data"
+        );
+        assert!(
+            (parts[r] - want).abs() < 1e-9 * whole,
+            "region {r}: {} vs {want}",
+            parts[r]
+        );
+    }
+}

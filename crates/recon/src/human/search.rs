@@ -569,7 +569,8 @@ fn polish_rise(
 }
 
 /// Each kept hypothesis' data term with its head's face and hair turned
-/// ([`Hypothesis::head_turned_data_loss`]), with the radiometric term.
+/// ([`Hypothesis::head_turned_data_loss`]) and its predicted rise per region
+/// ([`FittedRadiometry::rise_k_px`]), with the radiometric term.
 fn head_cue(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
@@ -593,6 +594,10 @@ fn head_cue(
             h.loss
         );
         h.head_turned_data_loss = Some(d);
+        if let Some(r) = h.radiometry.as_mut() {
+            let body = super::posed_body(problem.model, problem.prior, s)?;
+            r.rise_k_px = problem.region_rise(&body.vertices, cfg).map(Into::into);
+        }
     }
     tracing::debug!("head cue: {:.2} s", t0.elapsed().as_secs_f64());
     Ok(())
