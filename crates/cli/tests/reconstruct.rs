@@ -69,6 +69,19 @@ fn reconstruct_writes_every_stage_and_fails_cleanly_without_reflection() {
     let params: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out2.join("params.json")).unwrap()).unwrap();
     assert!(!params["human"]["hypotheses"].as_array().unwrap().is_empty());
+    // The thermal fit (the capture has background frames), and each hypothesis says which
+    // parts of its body the reflection shows.
+    assert_eq!(params["human"]["data_term"], "radiometric");
+    for h in params["human"]["hypotheses"].as_array().unwrap() {
+        let rise = &h["radiometry"]["rise_k_px"];
+        let parts: Vec<f64> = ["clothing", "skin", "face", "hair"]
+            .map(|r| rise[r].as_f64().unwrap())
+            .into();
+        assert!(
+            parts.iter().all(|&x| x >= 0.0) && parts.iter().sum::<f64>() > 0.0,
+            "{rise}"
+        );
+    }
     assert_eq!(read_tree(&cap), before, "reconstruct modified its input");
     // A simulated capture carries its truth: reconstruct scored itself, and `score` gives the
     // same figures from the files alone (the body re-posed from params.json).
