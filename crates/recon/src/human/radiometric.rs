@@ -495,10 +495,11 @@ impl Radiometry {
         let mut out = [0.0; REGIONS];
         for p in 0..input.pixels() {
             let g = s.reflectance[input.object(p)];
-            for (r, o) in out.iter_mut().enumerate() {
-                let mut only = [0.0; REGIONS];
-                only[r] = s.contrast[r];
-                *o += g * input.covered(p, &only);
+            for &(i, w) in input.entries(p) {
+                let i = i as usize;
+                for (r, o) in out.iter_mut().enumerate() {
+                    *o += g * w * input.occ[i] * input.mix[i][r] * s.contrast[r];
+                }
             }
         }
         out
