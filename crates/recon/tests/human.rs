@@ -567,6 +567,72 @@ fn search_candidates_cover_every_facing() {
     assert!(((f * Vector3::z()).dot(&up) - 1.0).abs() < 1e-9);
 }
 
+/// Each state is scored in its own build (`search.builds` gives the candidates several): one
+/// scratch that sees a state of another build, then one of its problem's again, gives each
+/// exactly what a problem made for that build gives, and the builds' losses differ (so a
+/// scratch that kept its problem's build would fail). With builds the candidates are the grid
+/// once per build, each in its own.
+#[test]
+fn a_state_is_scored_in_its_own_build() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let problem = truth_problem(&sc, &sim, &rays);
+    let cfg = HumanConfig::default();
+    let other = irmirror_body::Phenotype {
+        gender: 0.9,
+        weight: 0.75,
+        ..Default::default()
+    };
+    let theirs = HumanProblem {
+        build: other,
+        ..problem
+    };
+    let (r0, _) = true_root(&sc, &sim);
+    let st = HumanState {
+        translation: sim.body.joints[0],
+        rotation: r0,
+        height: HEIGHT_MEAN + 0.05,
+        build: problem.build,
+        latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
+        residual: Vec::new(),
+    };
+    let st_other = HumanState {
+        build: other,
+        ..st.clone()
+    };
+    let target = problem.targets();
+    let batch = Batch {
+        rays: &rays,
+        target: &target,
+        weight: None,
+        rise: None,
+        sigma_m2: 3e-5,
+    };
+    let mut ws = problem.scratch().unwrap();
+    let mine = problem.score(&mut ws, &st, &batch, &cfg).unwrap().0;
+    let switched = problem.score(&mut ws, &st_other, &batch, &cfg).unwrap().0;
+    let back = problem.score(&mut ws, &st, &batch, &cfg).unwrap().0;
+    let mut ws_theirs = theirs.scratch().unwrap();
+    let own = theirs
+        .score(&mut ws_theirs, &st_other, &batch, &cfg)
+        .unwrap()
+        .0;
+    assert_eq!(mine, back);
+    assert!(
+        (switched - own).abs() <= 1e-12 * own.abs(),
+        "{switched} {own}"
+    );
+    assert!((switched - mine).abs() > 1e-3, "{switched} {mine}");
+    let mut with = cfg.clone();
+    with.search.builds = vec![problem.build, other];
+    let c = problem.candidates(&with, 3).unwrap();
+    let s = &with.search;
+    assert_eq!(c.len(), 2 * s.yaw_bins * s.distances * s.pose_modes.len());
+    for b in [problem.build, other] {
+        assert_eq!(c.iter().filter(|st| st.build == b).count(), c.len() / 2);
+    }
+}
+
 /// Issue 25: a pedestrian facing away from the car (out of the old starts' ± 57° about facing
 /// the objects) whom the fit can represent, true objects and mask, Boson: the global search
 /// reports a hypothesis within 30° of the true facing, and the best hypothesis' root is within

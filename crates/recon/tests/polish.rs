@@ -1,4 +1,4 @@
-//! The polishes of refined hypotheses (limb and yaw) on simulated captures: each must end
+//! The polishes of refined hypotheses (limb, yaw and place) on simulated captures: each must end
 //! lower than the refinement it starts from, and nearer the true body.
 
 mod common;
@@ -101,5 +101,34 @@ fn the_yaw_polish_leaves_a_wrong_yaw() {
             l1 < l0 - 0.05 && a1.1 < a0.1 - 0.05,
             "{l0} {a0:?} → {l1} {a1:?}"
         );
+    });
+}
+
+/// The place polish brings a refined fit back from a wrong distance: car seed 1 in the kick,
+/// started from "stand" at the true facing with the root slid 20 % of its distance from the
+/// mirror farther out (horizontally: the ground is known, so the feet keep their height), the
+/// refinement keeps most of that distance; the polish (± 12 %, each refined again) ends lower
+/// and nearer the true body.
+#[test]
+fn the_place_polish_leaves_a_wrong_distance() {
+    with_posed(true, &kick(), |problem, start, angle| {
+        let (from, _) = problem.mask_ray_mean().unwrap();
+        let far = problem.slid(start, &from, 0.2);
+        let up = problem.up.normalize();
+        let step = far.translation - start.translation;
+        let out = start.translation - from;
+        assert!(up.dot(&step).abs() < 1e-12, "{step}");
+        assert!(
+            (step - (out - up * up.dot(&out)) * 0.2).norm() < 1e-12,
+            "{step}"
+        );
+        let ((l0, a0), after) =
+            refine_then_polish(problem, &far, angle, 0, |refined, cfg, polish_with| {
+                problem
+                    .place_polish(std::slice::from_ref(refined), cfg, polish_with, 0)
+                    .unwrap()
+            });
+        let (l1, a1) = after.expect("the polish ends lower");
+        assert!(l1 < l0 && a1.1 < a0.1, "{l0} {a0:?} → {l1} {a1:?}");
     });
 }

@@ -242,6 +242,7 @@ fn run_capture(
         if variant == Variant::TrueShape {
             let truth = p.scene.person.phenotype;
             cfg.human.build = truth;
+            cfg.human.search.builds.clear();
             cfg.human.height_prior[0] = truth.height;
         }
         if variant == Variant::TrueRadiometry {

@@ -47,6 +47,7 @@
 mod bank;
 mod edge;
 mod facing;
+mod grid;
 mod limbs;
 mod observe;
 mod polish;
@@ -186,6 +187,7 @@ impl HumanConfig {
             ("active_margin_m", self.active_margin_m),
             ("refine_lr_scale", self.refine_lr_scale),
             ("search.yaw_polish_deg", self.search.yaw_polish_deg),
+            ("search.place_polish_frac", self.search.place_polish_frac),
             (
                 "radiometric.polish_lr_scale",
                 self.radiometric.polish_lr_scale,
@@ -197,6 +199,13 @@ impl HumanConfig {
                     "[human] {name} = {v}: must be a finite number ≥ 0"
                 )));
             }
+        }
+        if self.search.place_polish_frac >= 1.0 {
+            return Err(crate::ReconError::Config(format!(
+                "[human] search.place_polish_frac = {}: must be below 1 (a move of the whole \
+                 distance puts the person on the mirror)",
+                self.search.place_polish_frac
+            )));
         }
         if let Some(v) = self.sigma_m2.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
             return Err(crate::ReconError::Config(format!(

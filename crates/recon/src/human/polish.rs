@@ -1,23 +1,30 @@
 //! Polishes of the refined hypotheses: the best few by the full loss each given another
-//! chance — a different pose part by part ([`HumanProblem::limb_polish`]) or a different yaw
-//! ([`HumanProblem::yaw_polish`]) — and replaced only when the new end's full loss is lower.
+//! chance — a different pose part by part ([`HumanProblem::limb_polish`]), a different yaw
+//! ([`HumanProblem::yaw_polish`]) or a different distance ([`HumanProblem::place_polish`]) —
+//! and replaced only when the new end's full loss is lower.
 //!
 //! Why a yaw polish: the search places the body in eight yaw bins and the refinement settles
 //! a facing to within tens of degrees; with the thermal judge's front/back choice, held-out
 //! bowls still ended 30–50° off on about one in five (README, "Twenty-fourth run"), which the
 //! refinement alone does not leave (its basin is narrower than that).
+//!
+//! Why a place polish: the search's distances are log-spaced 22 % apart and a mirror image
+//! barely changes as the person slides along its rays (a taller person farther away looks the
+//! same), so the refinement keeps the distance it starts at; on cars, placed at the true root
+//! the search's "stand" pose ended at a lower data term than the fits (README, "Fourteenth
+//! run"), whose roots lie along the objects→person line.
 
 use super::limbs::Polished;
 use super::search::Refined;
 use super::{HumanConfig, HumanProblem, HumanState, Stratified};
 use crate::ReconError;
 use irmirror_capture::Image;
-use nalgebra::{Rotation3, Unit};
+use nalgebra::{Rotation3, Unit, Vector3};
 use rayon::prelude::*;
 
 /// The best `n` refined hypotheses by the full loss, handed to `polish`; each replaced by its
 /// polished end where there is one (its loss curve extended, its evaluation dropped).
-pub(super) fn polish_best(
+fn polish_best(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
     (n, name): (usize, &str),
@@ -49,6 +56,35 @@ pub(super) fn polish_best(
     Ok(())
 }
 
+/// The polishes `cfg.search` asks for (limb, yaw, place: [`polish_best`] each), in that
+/// order, on the refined hypotheses; `(edge_dist, sample)` and `seed` as the refinement takes
+/// them.
+pub(super) fn polish_refined(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    (edge_dist, sample): (&Image<f64>, Option<&Stratified>),
+    seed: u64,
+    refined: &mut [Option<Refined>],
+) -> Result<(), ReconError> {
+    let s = &cfg.search;
+    if s.limb_polish > 0 {
+        polish_best(problem, cfg, (s.limb_polish, "limb"), refined, |states| {
+            problem.limb_polish(states, cfg, edge_dist, sample, seed)
+        })?;
+    }
+    if s.yaw_polish > 0 {
+        polish_best(problem, cfg, (s.yaw_polish, "yaw"), refined, |states| {
+            problem.yaw_polish(states, cfg, (edge_dist, sample), seed)
+        })?;
+    }
+    if s.place_polish > 0 {
+        polish_best(problem, cfg, (s.place_polish, "place"), refined, |states| {
+            problem.place_polish(states, cfg, (edge_dist, sample), seed)
+        })?;
+    }
+    Ok(())
+}
+
 impl HumanProblem<'_> {
     /// `st` with its root turned by `deg` degrees about the up axis (through the root).
     pub fn yawed(&self, st: &HumanState, deg: f64) -> HumanState {
@@ -59,10 +95,8 @@ impl HumanProblem<'_> {
         }
     }
 
-    /// The yaw polish (module docs): each of `states` turned by ± `search.yaw_polish_deg`,
-    /// both refined again as the fit refines a survivor; the lower end replaces the state when
-    /// its full loss is below the state's (`None`: kept as it is). `(edge_dist, sample)` and
-    /// `seed` as the refinement takes them.
+    /// The yaw polish (module docs): each of `states` turned by ± `search.yaw_polish_deg`
+    /// ([`Self::neighbour_polish`]).
     pub fn yaw_polish(
         &self,
         states: &[HumanState],
@@ -71,26 +105,86 @@ impl HumanProblem<'_> {
         seed: u64,
     ) -> Result<Vec<Option<Polished>>, ReconError> {
         let deg = cfg.search.yaw_polish_deg;
+        self.neighbour_polish(
+            states,
+            cfg,
+            (&[-deg, deg], &|st, d| self.yawed(st, d), "yaw"),
+            (edge_dist, sample),
+            seed.wrapping_mul(7919).wrapping_add(90_000),
+        )
+    }
+
+    /// The place polish (module docs): each of `states` moved nearer and farther by
+    /// `search.place_polish_frac` of its distance from the mirror ([`Self::slid`],
+    /// [`Self::neighbour_polish`]).
+    pub fn place_polish(
+        &self,
+        states: &[HumanState],
+        cfg: &HumanConfig,
+        (edge_dist, sample): (&Image<f64>, Option<&Stratified>),
+        seed: u64,
+    ) -> Result<Vec<Option<Polished>>, ReconError> {
+        let f = cfg.search.place_polish_frac;
+        let from = self.mask_ray_mean()?.0;
+        self.neighbour_polish(
+            states,
+            cfg,
+            (&[-f, f], &|st, x| self.slid(st, &from, x), "place"),
+            (edge_dist, sample),
+            seed.wrapping_mul(7919).wrapping_add(95_000),
+        )
+    }
+
+    /// `st` moved away from `from` (a point on the mirror) along the line through its root by
+    /// `frac` of its distance (nearer for `frac` < 0); with a floor the move is horizontal, so
+    /// the feet stay at their height above it.
+    pub fn slid(&self, st: &HumanState, from: &Vector3<f64>, frac: f64) -> HumanState {
+        let mut step = (st.translation - from) * frac;
+        if self.floor.is_some() {
+            let up = self.up.normalize();
+            step -= up * up.dot(&step);
+        }
+        HumanState {
+            translation: st.translation + step,
+            ..st.clone()
+        }
+    }
+
+    /// Each of `states` moved to `make(state, m)` for every `m` of `moves`, each refined again
+    /// as the fit refines a survivor (`(edge_dist, sample)` as the refinement takes them, batch
+    /// seeds from `seed`); the lowest end replaces the state when its full loss is below the
+    /// state's (`None`: kept as it is).
+    #[allow(clippy::type_complexity)]
+    fn neighbour_polish(
+        &self,
+        states: &[HumanState],
+        cfg: &HumanConfig,
+        (moves, make, name): (
+            &[f64],
+            &(dyn Fn(&HumanState, f64) -> HumanState + Sync),
+            &str,
+        ),
+        (edge_dist, sample): (&Image<f64>, Option<&Stratified>),
+        seed: u64,
+    ) -> Result<Vec<Option<Polished>>, ReconError> {
         states
             .iter()
             .enumerate()
             .map(|(k, st)| {
                 let own = self.full_eval(st, cfg)?.loss;
-                let ends: Vec<Option<(Polished, f64)>> = [-deg, deg]
+                let ends: Vec<Option<(Polished, f64)>> = moves
                     .par_iter()
                     .enumerate()
-                    .map(|(j, &d)| {
-                        let run_seed = seed
-                            .wrapping_mul(7919)
-                            .wrapping_add(90_000 + 2 * k as u64 + j as u64);
+                    .map(|(j, &m)| {
+                        let run_seed = seed.wrapping_add((moves.len() * k + j) as u64);
                         let Some((end, curve)) =
-                            self.refine(&self.yawed(st, d), cfg, edge_dist, sample, run_seed)?
+                            self.refine(&make(st, m), cfg, edge_dist, sample, run_seed)?
                         else {
                             return Ok(None);
                         };
                         let loss = self.full_eval(&end, cfg)?.loss;
                         tracing::debug!(
-                            "yaw polish {k} ({d:+.0}°): full loss {own:.4} → {loss:.4}"
+                            "{name} polish {k} ({m:+.2}): full loss {own:.4} → {loss:.4}"
                         );
                         Ok(Some(((end, curve), loss)))
                     })

@@ -424,6 +424,7 @@ impl HumanProblem<'_> {
         batch: &Batch<'_>,
         cfg: &HumanConfig,
     ) -> Result<(f64, f64), ReconError> {
+        self.set_build(ws, &st.build)?;
         let at = Tangent {
             translation: &st.translation,
             omega: &Vector3::zeros(),
@@ -472,6 +473,7 @@ impl HumanProblem<'_> {
         seed: u64,
     ) -> Result<Option<(HumanState, Vec<f64>)>, ReconError> {
         let mut ws = self.scratch()?;
+        self.set_build(&mut ws, &init.build)?;
         let mut st = init.clone();
         let base = st.rotation;
         let mut omega = Vector3::zeros();

@@ -5,6 +5,7 @@ use super::problem::Meet;
 use super::radiometric::Scalars;
 use super::{HumanProblem, phenotype, shaped_body};
 use crate::ReconError;
+use irmirror_body::Phenotype;
 use irmirror_body::model::BodyGrad;
 use irmirror_render::occupancy::{OccupancyGrad, SoftRenderer};
 use nalgebra::Vector3;
@@ -15,25 +16,17 @@ const HEIGHT_STEP: f64 = 1e-4;
 
 impl HumanProblem<'_> {
     /// Buffers reused across steps (allocation-free after the first step while the height
-    /// stays; a new height reshapes the body).
+    /// stays; a new height reshapes the body), holding the problem's build.
     pub fn scratch(&self) -> Result<Scratch, ReconError> {
-        let height = super::HEIGHT_MEAN;
-        let shaped = shaped_body(self.model, &self.build, height)?;
-        let dz_dheight = self.dz_dheight(height)?;
-        let mut direction = shaped.clone();
-        irmirror_body::shape::direction_into(&self.model.asset, &dz_dheight, &mut direction);
-        let mean_piece = MeanPiece {
-            dz_dheight,
-            shaped: shaped.clone(),
-            direction,
-        };
+        let (shaped, mean_piece) = self.mean_piece(&self.build)?;
         // The BVH's topology comes from the rest body, whichever state a scratch sees first, so
         // results do not depend on which thread evaluates which candidate (refits move boxes,
         // never the tree).
         let renderer = Some(SoftRenderer::new(&shaped.vertices, &self.model.asset.faces));
         Ok(Scratch {
             shaped,
-            height,
+            build: self.build,
+            height: super::HEIGHT_MEAN,
             off_mean: None,
             mean_piece,
             posed: self.model.posed_buffers(),
@@ -51,11 +44,45 @@ impl HumanProblem<'_> {
         })
     }
 
-    /// `∂z/∂h`: the shape coefficients' derivative in the height slider.
-    fn dz_dheight(&self, h: f64) -> Result<Vec<f64>, ReconError> {
+    /// The rest body of `build` at the mean height, and the shape map's linear piece there.
+    fn mean_piece(
+        &self,
+        build: &Phenotype,
+    ) -> Result<(irmirror_body::ShapedBody<f64>, MeanPiece), ReconError> {
+        let height = super::HEIGHT_MEAN;
+        let shaped = shaped_body(self.model, build, height)?;
+        let dz_dheight = self.dz_dheight(build, height)?;
+        let mut direction = shaped.clone();
+        irmirror_body::shape::direction_into(&self.model.asset, &dz_dheight, &mut direction);
+        let piece = MeanPiece {
+            dz_dheight,
+            shaped: shaped.clone(),
+            direction,
+        };
+        Ok((shaped, piece))
+    }
+
+    /// Makes `ws` hold `build` (nothing when it already does): a state's own build, which the
+    /// search's build options vary (`search.builds`). The body is reshaped at the next
+    /// [`Self::set_height`].
+    pub(super) fn set_build(&self, ws: &mut Scratch, build: &Phenotype) -> Result<(), ReconError> {
+        if ws.build == *build {
+            return Ok(());
+        }
+        let (shaped, piece) = self.mean_piece(build)?;
+        ws.shaped = shaped;
+        ws.mean_piece = piece;
+        ws.off_mean = None;
+        ws.height = super::HEIGHT_MEAN;
+        ws.build = *build;
+        Ok(())
+    }
+
+    /// `∂z/∂h`: the shape coefficients' derivative in the height slider for `build`.
+    fn dz_dheight(&self, build: &Phenotype, h: f64) -> Result<Vec<f64>, ReconError> {
         let (lo, hi) = ((h - HEIGHT_STEP).max(0.0), (h + HEIGHT_STEP).min(1.0));
-        let zp = self.model.shape_coefficients(&phenotype(&self.build, hi))?;
-        let zm = self.model.shape_coefficients(&phenotype(&self.build, lo))?;
+        let zp = self.model.shape_coefficients(&phenotype(build, hi))?;
+        let zm = self.model.shape_coefficients(&phenotype(build, lo))?;
         Ok(zp
             .iter()
             .zip(&zm)
@@ -73,8 +100,8 @@ impl HumanProblem<'_> {
         if ws.height == h {
             return Ok(());
         }
-        let dz = self.dz_dheight(h)?;
-        let z = self.model.shape_coefficients(&phenotype(&self.build, h))?;
+        let dz = self.dz_dheight(&ws.build, h)?;
+        let z = self.model.shape_coefficients(&phenotype(&ws.build, h))?;
         let mean = &ws.mean_piece;
         // The derivative by differences carries rounding of ≈ 1e-12; a knot changes it by O(1).
         let on_mean_piece = dz
@@ -107,6 +134,8 @@ impl HumanProblem<'_> {
 /// Buffers of [`HumanProblem::loss_grad`], reused across steps.
 pub struct Scratch {
     pub(super) shaped: irmirror_body::ShapedBody<f64>,
+    /// The build `shaped` was made for (the height slider aside).
+    pub(super) build: Phenotype,
     /// The height slider `shaped` was made for.
     pub(super) height: f64,
     /// The rest body's derivative in the slider at `height` when it is off the mean's piece.

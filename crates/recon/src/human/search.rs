@@ -8,7 +8,9 @@
 //!    facing the objects) × `distances` root distances log-spaced over `init_distance_m` along
 //!    the mask's mean reflected ray (the feet on the floor when it is known) × `pose_modes`
 //!    (stand, walk, sit: templates of the pose set, encoded by the prior; the prior's mean,
-//!    latent 0, is a half-crouch that fits nobody's silhouette). Default 8 × 12 × 3 = 288.
+//!    latent 0, is a half-crouch that fits nobody's silhouette) × `builds` (body builds,
+//!    each state's own from then on; default: `[human] build` alone). Default 8 × 12 × 3 =
+//!    288 (`grid.rs`).
 //! 2. **Screening, then successive halving.** All candidates are scored as they stand (one
 //!    forward pass at the blur `screen_sigma_m2`); the best `keep_scored` go on (with
 //!    `distinct_cuts`, off by default, the best distinct ones: root > 25 cm or facing > 45°
@@ -44,7 +46,7 @@
 //!    batch at half the rates on 1. A larger capture (a car door) keeps the fresh
 //!    draws at the full rates ([`HumanProblem::refine_sample`]).
 
-use super::polish::polish_best;
+use super::polish::polish_refined;
 use super::problem::{Draw, FullEval};
 use super::scratch::Scratch;
 use super::{
@@ -54,7 +56,6 @@ use super::{
 use crate::ReconError;
 use irmirror_geom::rotation::{axis_angle_to_matrix, matrix_to_axis_angle};
 use nalgebra::{Matrix3, Vector3};
-use rand::Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -73,6 +74,10 @@ pub struct SearchConfig {
     /// Pose modes: activity templates of the pose set (`irmirror_body::prior::generator`),
     /// encoded by the prior. People near a car stand or walk; at a table they may sit.
     pub pose_modes: Vec<String>,
+    /// Body builds (phenotypes; each state's height slider is fitted on top) the candidates
+    /// are made in, each a state's own through the rounds and the refinement; empty: `[human]
+    /// build` alone.
+    pub builds: Vec<irmirror_body::Phenotype>,
     /// Candidates kept after scoring the grid as it stands (no steps).
     pub keep_scored: usize,
     /// Halving rounds.
@@ -136,6 +141,13 @@ pub struct SearchConfig {
     pub yaw_polish: usize,
     /// The yaw polish's turn, degrees.
     pub yaw_polish_deg: f64,
+    /// The best refined hypotheses (by the full loss) the place polish tries to better
+    /// ([`HumanProblem::place_polish`]: the root moved nearer and farther along the line from
+    /// the mirror by `place_polish_frac` of its distance, each refined again, the lowest kept
+    /// when below the hypothesis); 0 (default): none.
+    pub place_polish: usize,
+    /// The place polish's move, a fraction of the person's distance from the mirror (0–1).
+    pub place_polish_frac: f64,
     /// Each survivor's partner is its silhouette twin ([`HumanProblem::twin`]: pose mirrored,
     /// root turned so an orthographic view along the objects→person line is unchanged) rather
     /// than its root turned 180° (`flipped`). Off:
@@ -149,6 +161,7 @@ impl Default for SearchConfig {
             yaw_bins: 8,
             distances: 12,
             pose_modes: ["stand", "walk", "sit"].map(String::from).to_vec(),
+            builds: Vec::new(),
             keep_scored: 16,
             rounds: 2,
             first_steps: 8,
@@ -167,6 +180,8 @@ impl Default for SearchConfig {
             limb_polish: 0,
             yaw_polish: 0,
             yaw_polish_deg: 25.0,
+            place_polish: 0,
+            place_polish_frac: 0.12,
             twin_flips: false,
         }
     }
@@ -236,82 +251,6 @@ pub fn facing_angle_deg(up: &Vector3<f64>, a: &Matrix3<f64>, b: &Matrix3<f64>) -
 }
 
 impl HumanProblem<'_> {
-    /// The search's candidates (deterministic for `seed`; module docs).
-    pub fn candidates(&self, cfg: &HumanConfig, seed: u64) -> Result<Vec<HumanState>, ReconError> {
-        let mask_rays: Vec<usize> = (0..self.rays.len())
-            .filter(|&i| self.mask.data[self.rays.pixel[i] as usize])
-            .collect();
-        if mask_rays.is_empty() {
-            return Err(ReconError::NoMaskRays);
-        }
-        let share = mask_rays.len() as f64 / self.rays.len() as f64;
-        if share > MAX_MASK_SHARE {
-            return Err(ReconError::MaskCoversObjects {
-                percent: 100.0 * share,
-                max_percent: 100.0 * MAX_MASK_SHARE,
-            });
-        }
-        let o = mask_rays
-            .iter()
-            .fold(Vector3::zeros(), |a, &i| a + self.rays.origin[i])
-            / mask_rays.len() as f64;
-        let d = mask_rays
-            .iter()
-            .fold(Vector3::zeros(), |a, &i| a + self.rays.dir[i])
-            .try_normalize(1e-12)
-            .ok_or(ReconError::NoMaskRays)?;
-        let s = &cfg.search;
-        let height = cfg.height_prior[0];
-        let up = self.up.normalize();
-        let mut rng = irmirror_geom::rng::seeded(seed, 21);
-        let generator = irmirror_body::prior::generator::PoseGenerator::new(self.model);
-        let shaped = super::shaped_body(self.model, &self.build, height)?;
-        let modes: Vec<super::bank::PoseMode> = s
-            .pose_modes
-            .iter()
-            .map(|name| {
-                let rotvecs = generator.template(name, &mut rng).ok_or_else(|| {
-                    ReconError::Config(format!(
-                        "unknown pose mode {name:?} in [human.search] pose_modes (one of {})",
-                        irmirror_body::prior::generator::TEMPLATES.join(", ")
-                    ))
-                })?;
-                self.pose_mode(&rotvecs, &shaped)
-            })
-            .collect::<Result<_, ReconError>>()?;
-        if modes.is_empty() {
-            return Err(ReconError::Config(
-                "[human.search] pose_modes is empty".to_string(),
-            ));
-        }
-        let [near, far] = cfg.init_distance_m;
-        let (nd, ny) = (s.distances.max(1), s.yaw_bins.max(1));
-        let mut out = Vec::with_capacity(nd * ny * modes.len());
-        for k in 0..nd {
-            // Log-spaced: the mirror image of someone 1 m away and of someone 8 m away differ
-            // by as much as those at 4 and 8 m.
-            let frac = (k as f64 + rng.random_range(0.3..0.7)) / nd as f64;
-            let dist = near * (far / near.max(1e-3)).powf(frac);
-            let on_ray = o + d * dist;
-            let base = upright_facing(&up, &(self.objects_centre - on_ray));
-            for j in 0..ny {
-                let yaw = std::f64::consts::TAU * j as f64 / ny as f64;
-                let rotation = axis_angle_to_matrix(&(up * yaw)) * base;
-                let at = HumanState {
-                    translation: on_ray,
-                    rotation,
-                    height,
-                    build: self.build,
-                    latent: Vec::new(),
-                    residual: Vec::new(),
-                };
-                // With a floor, stand there: the ray passes through the body's column.
-                out.extend(modes.iter().map(|m| self.in_mode(&at, m)));
-            }
-        }
-        Ok(out)
-    }
-
     /// Each state's loss on `batch` as it stands (no gradient, no steps), in parallel with one
     /// scratch per thread; the states in their order.
     pub(super) fn score_states(
@@ -614,7 +553,8 @@ pub fn fit_human(
     cfg.check()?;
     let cfg = &problem.prior_weighted(cfg);
     let s = &cfg.search;
-    let candidates = s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len();
+    let candidates =
+        s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len() * s.builds.len().max(1);
     // With a polish, the search and refinement fit the mask and the thermal rise comes last.
     let thermal = problem.radiometric(cfg).is_some();
     let polish = if thermal {
@@ -640,24 +580,13 @@ pub fn fit_human(
             }))
         })
         .collect::<Result<_, ReconError>>()?;
-    if s.limb_polish > 0 {
-        polish_best(
-            problem,
-            cfg,
-            (s.limb_polish, "limb"),
-            &mut refined,
-            |states| problem.limb_polish(states, cfg, &edge_dist, sample.as_ref(), seed),
-        )?;
-    }
-    if s.yaw_polish > 0 {
-        polish_best(
-            problem,
-            cfg,
-            (s.yaw_polish, "yaw"),
-            &mut refined,
-            |states| problem.yaw_polish(states, cfg, (&edge_dist, sample.as_ref()), seed),
-        )?;
-    }
+    polish_refined(
+        problem,
+        cfg,
+        (&edge_dist, sample.as_ref()),
+        seed,
+        &mut refined,
+    )?;
     if polish > 0 {
         tracing::debug!("mask refinement: {:.2} s", t0.elapsed().as_secs_f64());
         polish_rise(problem, cfg, seed, &mut refined)?;
