@@ -631,6 +631,10 @@ fn a_state_is_scored_in_its_own_build() {
     for b in [problem.build, other] {
         assert_eq!(c.iter().filter(|st| st.build == b).count(), c.len() / 2);
     }
+    // A build off the sliders' range is an error that names the slider.
+    with.search.builds[1].weight = 1.7;
+    let e = problem.candidates(&with, 3).unwrap_err().to_string();
+    assert!(e.contains("weight") && e.contains("1.7"), "{e}");
 }
 
 /// Issue 25: a pedestrian facing away from the car (out of the old starts' ± 57° about facing

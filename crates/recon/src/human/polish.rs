@@ -216,4 +216,16 @@ mod tests {
             assert!(e.contains("search.yaw_polish_deg"), "{e}");
         }
     }
+
+    /// A place move the polish cannot take (negative, the whole distance or more, not a
+    /// number) is refused by name.
+    #[test]
+    fn a_bad_place_move_is_refused() {
+        for bad in [-0.1, 1.0, 2.0, f64::NAN] {
+            let mut cfg = HumanConfig::default();
+            cfg.search.place_polish_frac = bad;
+            let e = cfg.check().unwrap_err().to_string();
+            assert!(e.contains("search.place_polish_frac"), "{bad}: {e}");
+        }
+    }
 }
