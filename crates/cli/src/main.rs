@@ -182,7 +182,8 @@ enum Command {
     /// Example: irmirror eval --preset quick --out eval-quick --cell car --limit 2
     Eval {
         /// Benchmark set: quick (8 captures per cell, ablations on 2 of them), full (60 per
-        /// cell, ablations on 10) or dev (the tuning set: other seeds).
+        /// cell, ablations on 10), dev (the tuning set: 8 per cell from other seeds) or
+        /// dev-full (60 per cell from the tuning seeds).
         #[arg(long, value_enum, default_value = "quick")]
         preset: irmirror_eval::bench::Set,
         /// Output report directory.

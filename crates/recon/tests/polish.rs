@@ -132,3 +132,98 @@ fn the_place_polish_leaves_a_wrong_distance() {
         assert!(l1 < l0 && a1.1 < a0.1, "{l0} {a0:?} → {l1} {a1:?}");
     });
 }
+
+/// The body parts no ray sees are reported in the template's configuration, the seen ones
+/// kept: tabletop seed 1, the person waving (the composite pose's arms and head) on straight
+/// legs (the "stand" template's); a state at the true root and facing in the true pose but
+/// with the kick's legs. The bowl shows the upper body: the legs take the template's configuration
+/// (the body nearer the truth, the data term within the tolerance), the waving arms keep theirs.
+#[test]
+fn unseen_legs_are_reported_standing() {
+    use irmirror_recon::human::*;
+    let asset = &model().asset;
+    let below = |j: usize, roots: &[&str]| {
+        let mut k = j as i32;
+        while k > 0 {
+            if roots.contains(&asset.meta.bone_names[k as usize].as_str()) {
+                return true;
+            }
+            k = asset.parents[k as usize];
+        }
+        false
+    };
+    let legs: Vec<usize> = (1..asset.meta.bone_names.len())
+        .filter(|&j| below(j, &["pelvis.L", "pelvis.R"]))
+        .collect();
+    let arms: Vec<usize> = (1..asset.meta.bone_names.len())
+        .filter(|&j| below(j, &["clavicle.L", "clavicle.R"]))
+        .collect();
+    let stand = irmirror_body::prior::generator::PoseGenerator::new(model())
+        .template("stand", &mut irmirror_geom::rng::seeded(0, 43))
+        .unwrap();
+    let mut standing = composite_pose();
+    for &j in &legs {
+        standing[j] = stand[j];
+    }
+    // The person as `with_posed` poses them (the prior's decoding), but for the kick's legs.
+    let truth: Vec<[f64; 3]> = prior()
+        .decode(&prior().encode(&standing).unwrap())
+        .unwrap()
+        .iter()
+        .map(|r| irmirror_geom::rotation::matrix_to_axis_angle(r).into())
+        .collect();
+    let mut kicked = truth.clone();
+    for &j in &legs {
+        kicked[j] = kick()[j];
+    }
+    with_posed(false, &standing, |problem, start, angle| {
+        let latent = prior().encode(&kicked).unwrap();
+        let st = HumanState {
+            residual: residual_to(prior(), &latent, &kicked).unwrap(),
+            latent,
+            ..start.clone()
+        };
+        let cfg = HumanConfig {
+            unseen_pose: "stand".into(),
+            ..HumanConfig::default()
+        };
+        let (reset, eval, changed) = problem.unseen_reset(&st, None, &cfg).unwrap();
+        let rotations = joint_rotations(prior(), &reset).unwrap();
+        let off_deg = |joints: &[usize], pose: &[[f64; 3]]| {
+            joints
+                .iter()
+                .map(|&j| {
+                    let r = irmirror_geom::rotation::axis_angle_to_matrix(
+                        &nalgebra::Vector3::from(pose[j]),
+                    );
+                    irmirror_geom::rotation::matrix_to_axis_angle(&(r.transpose() * rotations[j]))
+                        .norm()
+                        .to_degrees()
+                })
+                .fold(0.0, f64::max)
+        };
+        let data = |s: &HumanState| problem.full_eval(s, &cfg).unwrap().data;
+        let (before, after) = (angle(&st), angle(&reset));
+        eprintln!(
+            "{changed} parts; per-vertex {:.3} → {:.3} m, data {:.4} → {:.4}",
+            before.1,
+            after.1,
+            data(&st),
+            data(&reset)
+        );
+        assert!(changed >= 2, "{changed} parts reset");
+        assert!(
+            off_deg(&legs, &stand) < 1e-6,
+            "legs {}°",
+            off_deg(&legs, &stand)
+        );
+        assert!(
+            off_deg(&arms, &kicked) < 1e-6,
+            "arms {}°",
+            off_deg(&arms, &kicked)
+        );
+        assert!(after.1 < before.1 - 0.02, "{before:?} → {after:?}");
+        assert!(data(&reset) <= data(&st) + cfg.unseen_tolerance);
+        assert_eq!(eval.map(|e| e.data), Some(data(&reset)));
+    });
+}

@@ -39,6 +39,9 @@ pub enum Set {
     /// 8 captures per cell from other seeds: the set stage-2 settings are tuned on, so that the
     /// quick and full sets stay held out. Never the source of a published figure.
     Dev,
+    /// 60 captures per cell from the tuning seeds (the first 8 are `dev`'s scenes), NETD varied
+    /// as in `full`: a tuning set large enough to tell a setting's effect from the draws'.
+    DevFull,
 }
 
 impl Set {
@@ -46,7 +49,7 @@ impl Set {
     pub fn per_cell(self) -> usize {
         match self {
             Set::Quick | Set::Dev => 8,
-            Set::Full => 60,
+            Set::Full | Set::DevFull => 60,
         }
     }
 
@@ -54,7 +57,7 @@ impl Set {
     pub fn ablated_per_cell(self) -> usize {
         match self {
             Set::Quick | Set::Dev => 2,
-            Set::Full => 10,
+            Set::Full | Set::DevFull => 10,
         }
     }
 
@@ -62,7 +65,7 @@ impl Set {
     pub fn seed_base(self) -> u64 {
         match self {
             Set::Quick | Set::Full => SEED_BASE,
-            Set::Dev => DEV_SEED_BASE,
+            Set::Dev | Set::DevFull => DEV_SEED_BASE,
         }
     }
 }
@@ -233,7 +236,7 @@ pub fn captures(set: Set) -> Vec<Planned> {
         for index in 0..set.per_cell() {
             let netd_mk = match set {
                 Set::Quick | Set::Dev => 50.0,
-                Set::Full => [30.0, 50.0, 80.0][index % 3],
+                Set::Full | Set::DevFull => [30.0, 50.0, 80.0][index % 3],
             };
             out.push(Planned {
                 id: format!("{cell}_{index:02}"),
@@ -511,6 +514,14 @@ mod tests {
         let dev: Vec<u64> = captures(Set::Dev).iter().map(|p| p.seed).collect();
         assert_eq!(dev.len(), 32);
         assert!(captures(Set::Full).iter().all(|p| !dev.contains(&p.seed)));
+        let dev_full: Vec<u64> = captures(Set::DevFull).iter().map(|p| p.seed).collect();
+        assert_eq!(dev_full.len(), 240);
+        assert!(dev.iter().all(|s| dev_full.contains(s)));
+        assert!(
+            captures(Set::Full)
+                .iter()
+                .all(|p| !dev_full.contains(&p.seed))
+        );
         let none = Selection {
             limit: Some(0),
             ..Selection::default()

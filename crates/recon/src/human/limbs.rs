@@ -64,7 +64,7 @@ pub(super) struct PartOptions {
 impl HumanProblem<'_> {
     /// The pose `st` states (rotation vectors, root zero): the latent's decoding with the
     /// residual folded in.
-    fn folded_pose(&self, st: &HumanState) -> Result<Vec<[f64; 3]>, ReconError> {
+    pub(super) fn folded_pose(&self, st: &HumanState) -> Result<Vec<[f64; 3]>, ReconError> {
         use irmirror_geom::rotation::matrix_to_axis_angle;
         let rotations = super::joint_rotations(self.prior, st)?;
         Ok(std::iter::once([0.0; 3])

@@ -57,6 +57,7 @@ mod refine;
 mod retrieve;
 mod scratch;
 pub mod search;
+mod unseen;
 
 pub use edge::edge_distance;
 pub use problem::{Draw, FullEval};
@@ -165,6 +166,15 @@ pub struct HumanConfig {
     pub retrieval: RetrievalConfig,
     /// Distinct hypotheses reported.
     pub top_k: usize,
+    /// The activity template ([`irmirror_body::prior::generator::TEMPLATES`]) the body parts
+    /// no ray sees are reported in ([`unseen`]; default "stand"); empty: as the refinement
+    /// left them. On 24 held-out bowls 2-D keypoints −0.056 ± 0.025 (22 better, 1 worse),
+    /// per-vertex −0.010 ± 0.008 m; mugs, cars and the hard view level (README,
+    /// "Thirty-first run").
+    pub unseen_pose: String,
+    /// How far the data term (all rays) may rise when a part takes `unseen_pose`'s
+    /// configuration, summed over the parts that take it.
+    pub unseen_tolerance: f64,
     /// How the body's triangles form a ray's occupancy (`irmirror_render::occupancy` docs).
     pub aggregation: Aggregation,
     /// The radiometric data term ([`radiometric`]).
@@ -188,6 +198,7 @@ impl HumanConfig {
             ("refine_lr_scale", self.refine_lr_scale),
             ("search.yaw_polish_deg", self.search.yaw_polish_deg),
             ("search.place_polish_frac", self.search.place_polish_frac),
+            ("unseen_tolerance", self.unseen_tolerance),
             (
                 "radiometric.polish_lr_scale",
                 self.radiometric.polish_lr_scale,
@@ -205,6 +216,14 @@ impl HumanConfig {
                 "[human] search.place_polish_frac = {}: must be below 1 (a move of the whole \
                  distance puts the person on the mirror)",
                 self.search.place_polish_frac
+            )));
+        }
+        let templates = irmirror_body::prior::generator::TEMPLATES;
+        if !self.unseen_pose.is_empty() && !templates.contains(&self.unseen_pose.as_str()) {
+            return Err(crate::ReconError::Config(format!(
+                "[human] unseen_pose = {:?}: not an activity template (one of {templates:?}, or \"\" \
+                 for none)",
+                self.unseen_pose
             )));
         }
         if let Some(v) = self.sigma_m2.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
@@ -288,6 +307,8 @@ impl Default for HumanConfig {
             search: SearchConfig::default(),
             retrieval: RetrievalConfig::default(),
             top_k: 3,
+            unseen_pose: "stand".into(),
+            unseen_tolerance: 0.002,
             aggregation: Aggregation::Silhouette,
             radiometric: radiometric::RadiometricConfig::default(),
         }

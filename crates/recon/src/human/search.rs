@@ -614,27 +614,7 @@ pub fn fit_human(
                 Some(e) => e,
                 None => problem.full_eval(&st, cfg)?,
             };
-            let radiometry = problem
-                .radiometric(cfg)
-                .zip(eval.scalars.as_ref())
-                .map(|(r, s)| FittedRadiometry::new(r, s));
-            let h = Hypothesis {
-                init: r.init,
-                translation_m: st.translation.into(),
-                root_rotvec_rad: matrix_to_axis_angle(&st.rotation).into(),
-                height: st.height,
-                build: st.build,
-                stature_m: stature_m(&shaped_body(problem.model, &st.build, st.height)?),
-                latent: st.latent.clone(),
-                residual: st.residual.clone(),
-                loss: eval.loss,
-                data_loss: eval.data,
-                soft_iou: eval.soft_iou,
-                radiometry,
-                head_turned_data_loss: None,
-                loss_curve: r.curve,
-            };
-            Ok((h, st))
+            Ok((hypothesis(problem, cfg, r.init, &st, eval, r.curve)?, st))
         })
         .collect::<Result<_, ReconError>>()?;
     scored.sort_by(|a, b| a.0.loss.total_cmp(&b.0.loss));
@@ -660,6 +640,18 @@ pub fn fit_human(
             kept.push((h, s));
         }
     }
+    // The parts no ray sees, in the template's configuration (ranked as refined: the reset
+    // moves the data term by at most its tolerance, the priors by what no ray decides).
+    kept.par_iter_mut().try_for_each(|(h, st)| {
+        let (reset, eval, changed) = problem.unseen_reset(st, Some(h.data_loss), cfg)?;
+        tracing::debug!("hypothesis {}: {changed} unseen parts reset", h.init);
+        if let Some(eval) = eval {
+            let curve = std::mem::take(&mut h.loss_curve);
+            *h = hypothesis(problem, cfg, h.init, &reset, eval, curve)?;
+            *st = reset;
+        }
+        Ok::<(), ReconError>(())
+    })?;
     head_cue(problem, cfg, &mut kept)?;
     let mask_rays = problem
         .rays
@@ -683,6 +675,37 @@ pub fn fit_human(
         },
         states,
     ))
+}
+
+/// The reported hypothesis of a refined state `st` from start `init`, evaluated on all rays.
+fn hypothesis(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    init: usize,
+    st: &HumanState,
+    eval: FullEval,
+    loss_curve: Vec<f64>,
+) -> Result<Hypothesis, ReconError> {
+    let radiometry = problem
+        .radiometric(cfg)
+        .zip(eval.scalars.as_ref())
+        .map(|(r, s)| FittedRadiometry::new(r, s));
+    Ok(Hypothesis {
+        init,
+        translation_m: st.translation.into(),
+        root_rotvec_rad: matrix_to_axis_angle(&st.rotation).into(),
+        height: st.height,
+        build: st.build,
+        stature_m: stature_m(&shaped_body(problem.model, &st.build, st.height)?),
+        latent: st.latent.clone(),
+        residual: st.residual.clone(),
+        loss: eval.loss,
+        data_loss: eval.data,
+        soft_iou: eval.soft_iou,
+        radiometry,
+        head_turned_data_loss: None,
+        loss_curve,
+    })
 }
 
 #[cfg(test)]
