@@ -264,7 +264,7 @@ pub fn write(stage: &Staging, prefix: &str, inputs: &ResultInputs<'_>) -> Result
         "support_plane": rec.objects.ground.plane,
         "objects": rec.objects.objects,
         "human": {
-            "note": "hypotheses[0] is the best by loss; the others are distinct (root > 25 cm apart or facing > 45° apart), the best one's front/back partner first; compare their losses.",
+            "note": "hypotheses[0] is the best by loss as refined (each one's fields are its state's after the parts no ray sees were reset to the stand template, [human] unseen_pose); the others are distinct (root > 25 cm apart or facing > 45° apart), the best one's front/back partner first; compare their losses.",
             "notes": notes(rec),
             "shape": "the build (hypotheses[].build: the mean adult's phenotype unless [human] build names one) with the fitted height slider (hypotheses[].height, stature_m)",
             "data_term": rec.human.data_term,

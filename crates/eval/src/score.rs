@@ -211,7 +211,7 @@ impl Scored {
     /// The best hypothesis' table, then one line per hypothesis.
     pub fn text(&self) -> String {
         let mut s = self.best.text_table();
-        s += "hypotheses (best by loss first): loss, root error, facing error, per-vertex error\n";
+        s += "hypotheses (best first, as ranked): loss, root error, facing error, per-vertex error\n";
         for (k, h) in self.hypotheses.iter().enumerate() {
             s += &format!(
                 "  #{k}: {:.3}, {:.3} m, {}, {}\n",

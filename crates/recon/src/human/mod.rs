@@ -360,7 +360,9 @@ pub struct Hypothesis {
 pub struct HumanFit {
     /// Best hypothesis first, then its front/back partner (the best turned > 135° from it,
     /// when one was refined), then distinct others (root > 25 cm apart or facing > 45° apart)
-    /// by loss, `top_k` in all.
+    /// by loss, `top_k` in all. Ranked as refined: each one's fields (loss included) are its
+    /// state's after the unseen parts' reset (`unseen_pose`), which moves the priors, so a
+    /// later hypothesis may show the lower loss.
     pub hypotheses: Vec<Hypothesis>,
     /// Candidates scored by the global search.
     pub candidates: usize,
