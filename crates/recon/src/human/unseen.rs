@@ -33,12 +33,9 @@ impl HumanProblem<'_> {
         // The template's one deterministic draw (as the pose bank's).
         let template = PoseGenerator::new(self.model)
             .template(&cfg.unseen_pose, &mut irmirror_geom::rng::seeded(0, 43))
+            // `HumanConfig::check` names the templates; this is for a caller that skipped it.
             .ok_or_else(|| {
-                ReconError::Config(format!(
-                    "[human] unseen_pose = {:?}: not an activity template (one of {:?})",
-                    cfg.unseen_pose,
-                    irmirror_body::prior::generator::TEMPLATES
-                ))
+                ReconError::Config(format!("[human] unseen_pose = {:?}", cfg.unseen_pose))
             })?;
         let asset = &self.model.asset;
         let base = match data {
