@@ -4,6 +4,7 @@ use crate::ReconError;
 use crate::human::radiometric::Radiometry;
 use crate::human::{Floor, HumanConfig, HumanFit, HumanProblem, HumanState, fit_human};
 use crate::objects::{Objects, Stage1Config, reconstruct_objects};
+pub use crate::plane::{PLANE_BLOCK_M, PlaneOccluder, SeenPlane};
 use crate::preprocess::{PreprocessConfig, Preprocessed, preprocess};
 use irmirror_body::BodyModel;
 use irmirror_body::prior::PosePrior;
@@ -99,13 +100,13 @@ pub trait Progress: Sync {
 }
 
 /// Reflected rays that see past every object and the support plane: a ray that hits a fitted
-/// object (a bowl's own rim, a neighbouring mug) or the support plane within
-/// [`PLANE_BLOCK_M`] of its origin cannot show the person, whatever their pose, so it is left
-/// out of the fit (its pixel is neither evidence for nor against a body).
+/// object (a bowl's own rim, a neighbouring mug) or the support plane where it is
+/// ([`PlaneOccluder::blocks`]) cannot show the person, whatever their pose, so it is left out
+/// of the fit (its pixel is neither evidence for nor against a body).
 pub fn unblocked(
     rays: &ReflectedRays<f64>,
     objects: &[irmirror_render::sdf::PlacedSdf],
-    plane: Option<&crate::plane::Plane>,
+    plane: Option<&PlaneOccluder<'_>>,
     trace: &TraceParams,
 ) -> ReflectedRays<f64> {
     use rayon::prelude::*;
@@ -128,17 +129,7 @@ pub fn unblocked(
             {
                 return false;
             }
-            if let Some(plane) = plane {
-                let n = plane.n();
-                let denom = n.dot(&ray.dir);
-                if denom < -1e-9 {
-                    let t = (plane.offset_m - n.dot(&o)) / denom;
-                    if t > 0.0 && t < PLANE_BLOCK_M {
-                        return false;
-                    }
-                }
-            }
-            true
+            !plane.is_some_and(|p| p.blocks(&o, &ray.dir, rays.pixel[i]))
         })
         .collect();
     let kept: Vec<usize> = keep
@@ -150,10 +141,6 @@ pub fn unblocked(
     rays.select_into(&kept, &mut out);
     out
 }
-
-/// Reach of the support plane as an occluder, metres (tables are finite; the floor under a car
-/// is not, but nobody stands under it).
-pub const PLANE_BLOCK_M: f64 = 0.6;
 
 /// The floor the person stands on: the ground under a fitted car, else `table_height_m` below
 /// a support plane seen in the depth image; `None` without either (up alone gives no height).
@@ -245,7 +232,8 @@ pub fn reflected_rays(
 }
 
 /// [`reflected_rays`] through any placed objects (the simulator's true shapes, for the
-/// benchmark's diagnosis), rays meeting `plane` dropped.
+/// benchmark's diagnosis), rays that `plane` blocks where the depth image shows it dropped
+/// ([`PlaneOccluder`]).
 pub fn reflected_rays_through(
     capture: &Capture,
     placed: &[irmirror_render::sdf::PlacedSdf],
@@ -255,6 +243,15 @@ pub fn reflected_rays_through(
 ) -> ReflectedRays<f64> {
     let (trace, normals) = cfg.rays_settings();
     let hcfg = cfg.human_settings();
+    let plane = plane.map(|plane| PlaneOccluder {
+        plane,
+        seen: Some(SeenPlane {
+            depth_m: &capture.depth_m,
+            camera: &capture.depth_camera,
+            mask,
+        }),
+    });
+    let plane = plane.as_ref();
     let mask_px = mask.data.iter().filter(|&&m| m).count();
     let max_px = hcfg.radiometric.footprint_max_mask_px;
     if hcfg.radiometric.enabled && max_px > 0 && mask_px <= max_px {
