@@ -370,11 +370,14 @@ pub fn notes(rec: &Reconstruction) -> Vec<String> {
     let hs = &rec.human.hypotheses;
     if let Some(best) = hs.first() {
         for (k, h) in hs.iter().enumerate().skip(1) {
-            if h.loss <= best.loss * 1.1 {
+            // The data term, not the total loss: the unseen parts' reset moves the priors of
+            // the reported states (hypotheses are ranked before it), and the data term may be
+            // negative (the thermal term's Huber residuals less their noise floor).
+            if explains_as_well(h.data_loss, best.data_loss) {
                 out.push(format!(
-                    "Hypothesis {k} explains the reflection about as well as the best (loss {:.3} against {:.3}): \
-                     the data do not decide between them.",
-                    h.loss, best.loss
+                    "Hypothesis {k} explains the reflection about as well as the best (data term {:.3} against \
+                     {:.3}): the data do not decide between them.",
+                    h.data_loss, best.data_loss
                 ));
             }
         }
@@ -395,6 +398,11 @@ pub fn notes(rec: &Reconstruction) -> Vec<String> {
         ));
     }
     out
+}
+
+/// Whether a data term `d` is within 10 % (of its magnitude, at least 0.005) of the best's.
+fn explains_as_well(d: f64, best: f64) -> bool {
+    d <= best + (0.1 * best.abs()).max(0.005)
 }
 
 /// Fewer reflection pixels than this make a "small reflection" note (the hard regime's 10–25
@@ -536,4 +544,20 @@ pub fn score_section(prefix: &str, scored: &irmirror_eval::Scored) -> String {
          fitted person (orange), true person (green), fitted objects (blue)</figcaption></figure>"
     );
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::explains_as_well;
+
+    /// Within 10 % of the best's data term (at least 0.005), either sign: a negative best (the
+    /// thermal term below its noise floor) is not turned into a tighter bound by a ratio.
+    #[test]
+    fn near_ties_are_judged_on_the_data_term() {
+        assert!(explains_as_well(0.105, 0.1) && !explains_as_well(0.115, 0.1));
+        assert!(explains_as_well(-0.095, -0.1) && !explains_as_well(-0.08, -0.1));
+        assert!(explains_as_well(0.004, 0.0) && !explains_as_well(0.006, 0.0));
+        // A lower data term than the best's (ranked lower through its priors) is a near tie.
+        assert!(explains_as_well(0.02, 0.05));
+    }
 }
