@@ -385,6 +385,33 @@ fn the_thermal_judge_prefers_the_true_facing() {
     });
 }
 
+/// Which parts of the person the mirror shows decides whether the thermal judge acts by
+/// default (`[human.retrieval] facing_head_share`): at the truth of car seed 1 a door sees the
+/// person from the hips up, face and hair a good share of the predicted rise; the same body
+/// raised until the door sees its legs and hips shows no head.
+#[test]
+fn the_head_share_falls_where_the_mirror_sees_no_head() {
+    use irmirror_recon::human::*;
+    with_thermal_car(1, |problem, sc, sim, r0, up| {
+        let cfg = HumanConfig::default();
+        let truth = exact_truth(sc, sim, r0);
+        let seen = problem.head_share(&truth, &cfg).unwrap().expect("a rise");
+        let raised = HumanState {
+            translation: truth.translation + up.normalize() * 0.8,
+            ..truth.clone()
+        };
+        let low = problem.head_share(&raised, &cfg).unwrap().expect("a rise");
+        eprintln!("head share at the truth {seen:.3}, raised 0.8 m {low:.3}");
+        assert!(seen > 0.05, "{seen}");
+        assert!(low < 0.05 && low < seen / 3.0, "{low} vs {seen}");
+        let mask = HumanProblem {
+            radiometry: None,
+            ..*problem
+        };
+        assert_eq!(mask.head_share(&truth, &cfg).unwrap(), None);
+    });
+}
+
 /// The outline twin of a mesh keeps every vertex on its line of sight, so applying it twice
 /// gives the mesh back, and the mask term of the true body barely moves while the
 /// rise's data term, which sees the face and the arms' skin, rises (car seed 1; measured:

@@ -392,7 +392,7 @@ impl HumanProblem<'_> {
             .collect();
         let survivors = self.bank_swap(survivors, cfg, seed)?;
         let survivors = self.limb_swap(survivors, cfg, seed)?;
-        let survivors = self.facing_swap(survivors, &cfg.retrieval)?;
+        let survivors = self.facing_swap(survivors, cfg)?;
         let survivors = self.retrieval_swap(survivors, &cfg.retrieval)?;
         let mut out = Vec::with_capacity(cfg.inits);
         for st in survivors {
@@ -618,7 +618,7 @@ pub fn fit_human(
         })
         .collect::<Result<_, ReconError>>()?;
     scored.sort_by(|a, b| a.0.loss.total_cmp(&b.0.loss));
-    problem.facing_rank(&mut scored, &cfg.retrieval)?;
+    problem.facing_rank(&mut scored, cfg)?;
     tracing::debug!("refinement + scoring: {:.2} s", t0.elapsed().as_secs_f64());
     let top_k = cfg.top_k.max(1);
     let mut kept: Vec<(Hypothesis, HumanState)> = Vec::new();
