@@ -317,6 +317,25 @@ impl BodyModel {
         pose: &Pose<T>,
         out: &mut PosedBody<T>,
     ) -> Result<(), BodyError> {
+        self.pose_surface_into(shaped, pose, out)?;
+        keypoints::regress(
+            &self.asset.coco_kp_index,
+            &self.asset.coco_vertex_index,
+            &self.keypoint_weights,
+            &out.vertices,
+            &mut out.keypoints,
+        );
+        Ok(())
+    }
+
+    /// [`Self::pose_into`] without the keypoints (`out.keypoints` are left as they were): for
+    /// a caller that draws only the surface of many bodies (the pose retrieval).
+    pub fn pose_surface_into<T: Real>(
+        &self,
+        shaped: &ShapedBody<T>,
+        pose: &Pose<T>,
+        out: &mut PosedBody<T>,
+    ) -> Result<(), BodyError> {
         pose.validate(self.n_joints())?;
         let a = &self.asset;
         fk::forward(
@@ -338,13 +357,6 @@ impl BodyModel {
             &out.world_rotations,
             &out.skin_offsets,
             &mut out.vertices,
-        );
-        keypoints::regress(
-            &a.coco_kp_index,
-            &a.coco_vertex_index,
-            &self.keypoint_weights,
-            &out.vertices,
-            &mut out.keypoints,
         );
         Ok(())
     }

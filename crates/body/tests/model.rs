@@ -104,6 +104,35 @@ fn translation_moves_everything_rigidly() {
     }
 }
 
+/// The surface-only posing draws the same surface and joints as the full one, into buffers
+/// another pose left behind, and leaves the keypoints alone.
+#[test]
+fn surface_only_posing_is_the_full_posings_surface() {
+    let m = model();
+    let shaped = m.shaped_phenotype::<f64>(&test_phenotype()).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut draw = || -> Vec<[f64; 3]> {
+        (0..36)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-0.4..0.4)))
+            .collect()
+    };
+    let (first, second) = (draw(), draw());
+    let at = Vector3::new(0.2, 0.1, -0.3);
+    let full = m
+        .pose(&shaped, &Pose::from_axis_angles(&second, at))
+        .unwrap();
+    let mut out = m
+        .pose(&shaped, &Pose::from_axis_angles(&first, Vector3::zeros()))
+        .unwrap();
+    let left = out.keypoints.clone();
+    m.pose_surface_into(&shaped, &Pose::from_axis_angles(&second, at), &mut out)
+        .unwrap();
+    assert_eq!(out.vertices, full.vertices);
+    assert_eq!(out.joints, full.joints);
+    assert_eq!(out.keypoints, left);
+    assert_ne!(out.keypoints, full.keypoints);
+}
+
 #[test]
 fn symmetric_poses_give_mirror_symmetric_meshes() {
     let m = model();

@@ -85,6 +85,17 @@ impl HumanProblem<'_> {
         let mut rotations = self.prior.decode(&latent)?;
         // Anny's own frame is Z up: the identity root stands upright.
         rotations[0] = Matrix3::identity();
+        self.mode_at(latent, rotations, shaped)
+    }
+
+    /// The mode of a decoded pose (`rotations`, root identity) on the rest body `shaped`: its
+    /// root's height above the lowest vertex measured.
+    fn mode_at(
+        &self,
+        latent: Vec<f64>,
+        rotations: Vec<Matrix3<f64>>,
+        shaped: &irmirror_body::ShapedBody<f64>,
+    ) -> Result<PoseMode, ReconError> {
         let body = self.model.pose(
             shaped,
             &irmirror_body::Pose {
@@ -102,6 +113,18 @@ impl HumanProblem<'_> {
             root_height: -lowest,
             rotations,
         })
+    }
+
+    /// `bank`'s poses (made at any height) at `height`: only the root's height differs.
+    pub(super) fn bank_at(
+        &self,
+        bank: &[PoseMode],
+        height: f64,
+    ) -> Result<Vec<PoseMode>, ReconError> {
+        let shaped = super::shaped_body(self.model, &self.build, height)?;
+        bank.par_iter()
+            .map(|m| self.mode_at(m.latent.clone(), m.rotations.clone(), &shaped))
+            .collect()
     }
 
     /// What the bank and the limb search choose from: the activity templates (one draw each,

@@ -134,7 +134,7 @@ impl HumanProblem<'_> {
         cfg: &RetrievalConfig,
         top: usize,
     ) -> Result<Option<[f64; 2]>, ReconError> {
-        self.thermal_facing_in(st, &self.pose_bank(usize::MAX, st.height)?, cfg, top)
+        self.thermal_facing_in(st, &self.pose_bank(cfg.judge_bank(), st.height)?, cfg, top)
     }
 
     /// [`Self::thermal_facing`] among the poses of `bank` (the source poses at `st`'s height:
@@ -157,7 +157,7 @@ impl HumanProblem<'_> {
         let shaped = super::shaped_body(self.model, &st.build, st.height)?;
         let mut out = [f64::INFINITY; 2];
         for (k, s) in [st.clone(), self.twin(st)?].iter().enumerate() {
-            for (cand, _) in self.candidates_in(s, bank, cfg)?.iter().take(top.max(1)) {
+            for (cand, _) in &self.candidates_in(s, bank, cfg, top)? {
                 let body = self.posed_with(&shaped, cand)?;
                 let r = self.thermal_residual(&body.vertices, &views, cfg, (rad, &observed));
                 out[k] = out[k].min(r);
@@ -168,17 +168,25 @@ impl HumanProblem<'_> {
 }
 
 /// The source poses at each height judged so far (a caller judging many states makes each
-/// height's once).
+/// height's once, and the poses' latents and rotations once for all heights).
 #[derive(Default)]
 struct Banks(Vec<(f64, Vec<PoseMode>)>);
 
 impl Banks {
-    fn at(&mut self, problem: &HumanProblem<'_>, height: f64) -> Result<&[PoseMode], ReconError> {
+    fn at(
+        &mut self,
+        problem: &HumanProblem<'_>,
+        height: f64,
+        size: usize,
+    ) -> Result<&[PoseMode], ReconError> {
         let i = match self.0.iter().position(|(h, _)| *h == height) {
             Some(i) => i,
             None => {
-                self.0
-                    .push((height, problem.pose_bank(usize::MAX, height)?));
+                let bank = match self.0.first() {
+                    Some((_, first)) => problem.bank_at(first, height)?,
+                    None => problem.pose_bank(size, height)?,
+                };
+                self.0.push((height, bank));
                 self.0.len() - 1
             }
         };
@@ -318,7 +326,7 @@ impl HumanProblem<'_> {
                 return Ok(Some(false));
             }
         }
-        let bank = banks.at(self, st.height)?;
+        let bank = banks.at(self, st.height, cfg.judge_bank())?;
         Ok(self
             .thermal_facing_in(st, bank, cfg, cfg.facing_top)?
             .map(|[own, twin]| twin < own))

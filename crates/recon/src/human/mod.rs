@@ -53,6 +53,7 @@ mod observe;
 mod polish;
 mod problem;
 pub mod radiometric;
+mod raster;
 mod refine;
 mod retrieve;
 mod scratch;

@@ -19,11 +19,16 @@
 //! not the facing: at the search's survivors it is off.
 
 use super::bank::PoseMode;
+use super::raster::{Distances, ceil_i, floor_i};
 use super::{HumanProblem, HumanState};
 use crate::ReconError;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
 
 /// Retrieval's raster and tolerance (module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -63,6 +68,10 @@ pub struct RetrievalConfig {
     pub facing: bool,
     /// The judge compares the best of this many outline-ranked poses per facing.
     pub facing_top: usize,
+    /// The judge draws its poses from this many source poses, spread by farthest-point
+    /// sampling in joint-rotation space (0: the whole bank, 729). Fewer are cheaper and lose
+    /// held-out mugs' successes: 365 or 486, 4 → 1 of 24 (README, "Thirty-fourth run").
+    pub facing_bank: usize,
     /// With `facing` on, the judge turns the search's survivors too (off: it ranks the
     /// refined hypotheses only — the survivors' front/back flips are refined either way; on
     /// 24 held-out bowls facing within 30° 14 (13 with the survivors turned), but root median
@@ -99,6 +108,7 @@ impl Default for RetrievalConfig {
             mean_of: 1,
             facing: false,
             facing_top: 30,
+            facing_bank: 0,
             facing_survivors: true,
             facing_min_turn_deg: 0.0,
             facing_head_share: 0.05,
@@ -107,6 +117,15 @@ impl Default for RetrievalConfig {
 }
 
 impl RetrievalConfig {
+    /// The judge's bank size ([`Self::facing_bank`]; 0: all).
+    pub(super) fn judge_bank(&self) -> usize {
+        if self.facing_bank == 0 {
+            usize::MAX
+        } else {
+            self.facing_bank
+        }
+    }
+
     /// Refuses a raster no retrieval can use: a length not a finite number > 0 (the shift's
     /// range ≥ 0), or more than 1,000 cells a side.
     pub fn check(&self) -> Result<(), ReconError> {
@@ -158,6 +177,8 @@ pub(super) struct View {
     e_u: Vector3<f64>,
     e_v: Vector3<f64>,
     root: Vector3<f64>,
+    /// The root's distance along the axis from the centre: `(root − centre) · axis`.
+    depth: f64,
     /// Raster cells of the mask rays' plane points.
     pub(super) mask: Vec<(i32, i32)>,
     /// The mask rays themselves (indices among the problem's rays), as `mask`.
@@ -168,12 +189,13 @@ pub(super) struct View {
 
 impl View {
     /// `p`'s raster cell in the plane, projected from the centre (`None`: behind the centre).
+    #[inline]
     fn project(&self, p: &Vector3<f64>, cfg: &RetrievalConfig) -> Option<(f64, f64)> {
         let along = (p - self.centre).dot(&self.axis);
         if along < 1e-3 {
             return None;
         }
-        let s = (self.root - self.centre).dot(&self.axis) / along;
+        let s = self.depth / along;
         let q = self.centre + (p - self.centre) * s - self.root;
         Some((
             (q.dot(&self.e_u) + cfg.half_width_m) / cfg.cell_m,
@@ -185,138 +207,6 @@ impl View {
 /// Cells per side of the raster.
 pub(super) fn side(cfg: &RetrievalConfig) -> usize {
     (2.0 * cfg.half_width_m / cfg.cell_m).ceil() as usize
-}
-
-/// Squared Euclidean distance transform of one line (Felzenszwalb & Huttenlocher).
-fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
-    let n = f.len();
-    let mut k = 0;
-    v[0] = 0;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    for q in 1..n {
-        loop {
-            let p = v[k];
-            let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
-            if s <= z[k] && k > 0 {
-                k -= 1;
-            } else {
-                k += 1;
-                v[k] = q;
-                z[k] = s;
-                z[k + 1] = f64::INFINITY;
-                break;
-            }
-        }
-    }
-    k = 0;
-    for (q, out) in d.iter_mut().enumerate() {
-        while z[k + 1] < q as f64 {
-            k += 1;
-        }
-        let p = v[k];
-        *out = (q as f64 - p as f64).powi(2) + f[p];
-    }
-}
-
-/// Distance (cells) from every cell of a `w`×`h` raster (rows of `w`) to the nearest cell
-/// where `seed` is true (large where there is none).
-fn distance_to(seed: &[bool], w: usize, h: usize) -> Vec<f64> {
-    const FAR: f64 = 1e12;
-    let mut g: Vec<f64> = seed.iter().map(|&s| if s { 0.0 } else { FAR }).collect();
-    let m = w.max(h);
-    let (mut d, mut v, mut z) = (vec![0.0; m], vec![0; m], vec![0.0; m + 1]);
-    let mut line = vec![0.0; m];
-    for row in 0..h {
-        line[..w].copy_from_slice(&g[row * w..(row + 1) * w]);
-        edt_1d(&line[..w], &mut d[..w], &mut v, &mut z);
-        g[row * w..(row + 1) * w].copy_from_slice(&d[..w]);
-    }
-    for col in 0..w {
-        for (r, l) in line[..h].iter_mut().enumerate() {
-            *l = g[r * w + col];
-        }
-        edt_1d(&line[..h], &mut d[..h], &mut v, &mut z);
-        for (r, x) in d[..h].iter().enumerate() {
-            g[r * w + col] = x.sqrt();
-        }
-    }
-    g
-}
-
-/// A silhouette's two distance maps (cells), truncated at `cap`, kept only on the window
-/// about it where they can differ from their far values: `cap` to the silhouette and 0 to its
-/// outside (the window reaches `cap` + 1 cells beyond the silhouette, so both are exact).
-struct Distances {
-    x0: i32,
-    y0: i32,
-    w: i32,
-    h: i32,
-    to_sil: Vec<f64>,
-    to_out: Vec<f64>,
-    cap: f64,
-}
-
-impl Distances {
-    fn new(sil: &[bool], n: usize, cap: f64) -> Self {
-        let (mut lo, mut hi) = ((n, n), (0, 0));
-        for (c, _) in sil.iter().enumerate().filter(|(_, s)| **s) {
-            let (x, y) = (c % n, c / n);
-            lo = (lo.0.min(x), lo.1.min(y));
-            hi = (hi.0.max(x), hi.1.max(y));
-        }
-        if lo.0 > hi.0 {
-            return Self {
-                x0: 0,
-                y0: 0,
-                w: 0,
-                h: 0,
-                to_sil: Vec::new(),
-                to_out: Vec::new(),
-                cap,
-            };
-        }
-        let margin = cap.ceil() as usize + 1;
-        let (x0, y0) = (lo.0.saturating_sub(margin), lo.1.saturating_sub(margin));
-        let (x1, y1) = ((hi.0 + margin).min(n - 1), (hi.1 + margin).min(n - 1));
-        let (w, h) = (x1 - x0 + 1, y1 - y0 + 1);
-        let crop: Vec<bool> = (y0..=y1)
-            .flat_map(|y| sil[y * n + x0..=y * n + x1].iter().copied())
-            .collect();
-        let outside: Vec<bool> = crop.iter().map(|s| !s).collect();
-        Self {
-            x0: x0 as i32,
-            y0: y0 as i32,
-            w: w as i32,
-            h: h as i32,
-            // Truncated once here: the shifts' loop reads each cell many times.
-            to_sil: distance_to(&crop, w, h)
-                .into_iter()
-                .map(|d| d.min(cap))
-                .collect(),
-            to_out: distance_to(&outside, w, h)
-                .into_iter()
-                .map(|d| d.min(cap))
-                .collect(),
-            cap,
-        }
-    }
-
-    /// The window's index of raster cell `(x, y)`, if it lies in the window.
-    fn index(&self, x: i32, y: i32) -> Option<usize> {
-        let (u, v) = (x - self.x0, y - self.y0);
-        (u >= 0 && v >= 0 && u < self.w && v < self.h).then(|| (v * self.w + u) as usize)
-    }
-
-    /// Distance to the silhouette, truncated (a cell beyond the window: `cap`).
-    fn to_sil(&self, x: i32, y: i32) -> f64 {
-        self.index(x, y).map_or(self.cap, |i| self.to_sil[i])
-    }
-
-    /// Distance to the silhouette's outside, truncated (a cell beyond the window: 0).
-    fn to_out(&self, x: i32, y: i32) -> f64 {
-        self.index(x, y).map_or(0.0, |i| self.to_out[i])
-    }
 }
 
 impl HumanProblem<'_> {
@@ -348,6 +238,7 @@ impl HumanProblem<'_> {
                     e_u,
                     e_v,
                     root: *root,
+                    depth: (root - centre).dot(&axis),
                     mask: Vec::new(),
                     mask_ray: Vec::new(),
                     empty: Vec::new(),
@@ -405,21 +296,41 @@ impl HumanProblem<'_> {
         cfg: &RetrievalConfig,
         mut f: impl FnMut(usize, usize),
     ) {
-        let n = side(cfg);
-        let projected: Vec<Option<(f64, f64)>> =
-            vertices.iter().map(|v| view.project(v, cfg)).collect();
+        let n = side(cfg) as i64;
+        // Per vertex: its raster point, and the first and last cell whose centre (`x + 0.5`)
+        // lies at or beyond it (`ceil(u − 0.5)`) and at or before it (`floor(u − 0.5)`), each
+        // way, clamped to one cell off the raster. All are monotone, so a triangle's cell
+        // range is the min / max over its corners: made once per vertex, not per triangle (a
+        // body's triangles mostly cover no cell centre), kept apart from the points so that
+        // the triangles' rejection reads 16 bytes a corner.
+        let mut at = Vec::with_capacity(vertices.len());
+        let mut span = Vec::with_capacity(vertices.len());
+        for v in vertices {
+            let p = view.project(v, cfg);
+            let cell = |x: i64| x.clamp(-1, n) as i32;
+            span.push(p.map_or([0, -1, 0, -1], |(u, w)| {
+                [
+                    cell(ceil_i(u - 0.5)),
+                    cell(floor_i(u - 0.5)),
+                    cell(ceil_i(w - 0.5)),
+                    cell(floor_i(w - 0.5)),
+                ]
+            }));
+            at.push(p);
+        }
         for (t, face) in self.model.asset.faces.iter().enumerate() {
-            let [Some(a), Some(b), Some(c)] = face.map(|i| projected[i as usize]) else {
-                continue;
-            };
-            let lo = |x: f64, y: f64, z: f64| (x.min(y).min(z) - 0.5).ceil().max(0.0) as usize;
-            let hi =
-                |x: f64, y: f64, z: f64| ((x.max(y).max(z) - 0.5).floor() as i64).min(n as i64 - 1);
-            let (x0, x1) = (lo(a.0, b.0, c.0), hi(a.0, b.0, c.0));
-            let (y0, y1) = (lo(a.1, b.1, c.1), hi(a.1, b.1, c.1));
-            if x1 < 0 || y1 < 0 {
+            let [a, b, c] = face.map(|i| span[i as usize]);
+            let x0 = a[0].min(b[0]).min(c[0]).max(0);
+            let x1 = a[1].max(b[1]).max(c[1]).min(n as i32 - 1);
+            let y0 = a[2].min(b[2]).min(c[2]).max(0);
+            let y1 = a[3].max(b[3]).max(c[3]).min(n as i32 - 1);
+            if x0 > x1 || y0 > y1 {
                 continue;
             }
+            // A corner behind the view's centre: the triangle is not drawn.
+            let [Some(a), Some(b), Some(c)] = face.map(|i| at[i as usize]) else {
+                continue;
+            };
             let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
             if area.abs() < 1e-12 {
                 continue;
@@ -427,14 +338,14 @@ impl HumanProblem<'_> {
             let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
                 ((q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)) * area.signum()
             };
-            for y in y0..=y1 as usize {
-                for x in x0..=x1 as usize {
+            for y in y0..=y1 {
+                for x in x0..=x1 {
                     let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
                     if edge(a, b, px, py) >= 0.0
                         && edge(b, c, px, py) >= 0.0
                         && edge(c, a, px, py) >= 0.0
                     {
-                        f(t, y * n + x);
+                        f(t, y as usize * n as usize + x as usize);
                     }
                 }
             }
@@ -490,6 +401,10 @@ impl HumanProblem<'_> {
                     .iter()
                     .map(|&(x, y)| dist.to_sil(x + du, y + dv))
                     .sum();
+                if miss >= best.0 {
+                    // The spill is ≥ 0: this shift cannot win.
+                    continue;
+                }
                 let spill: f64 = near.iter().map(|&(x, y)| dist.to_out(x + du, y + dv)).sum();
                 if miss + spill < best.0 {
                     best = (miss + spill, (du, dv));
@@ -501,36 +416,66 @@ impl HumanProblem<'_> {
 
     /// `st` tried in every pose of `bank` (its root and facing kept, the feet moved to the
     /// floor when known: [`Self::in_mode`]), ranked by the retrieval score (module docs): the
-    /// bank's indices, best first, with their scores.
+    /// bank's indices of the best `keep` (all: `usize::MAX`), best first, with their scores —
+    /// ties in the bank's order.
+    ///
+    /// Exact, and cheaper for a small `keep`: a pose whose views scored so far already sum
+    /// above the worst of the best `keep` complete scores seen is not scored further (its own
+    /// is higher still, and that worst only falls), so which poses are cut depends on the
+    /// workers' timing but the answer does not.
     pub(super) fn retrieve(
         &self,
         st: &HumanState,
         bank: &[PoseMode],
         cfg: &RetrievalConfig,
+        keep: usize,
     ) -> Result<Vec<(usize, f64)>, ReconError> {
         let views = self.views(&st.translation, cfg);
         if views.is_empty() {
             return Ok(Vec::new());
         }
+        let keep = keep.max(1);
         let shaped = super::shaped_body(self.model, &st.build, st.height)?;
-        let mut scored: Vec<(usize, f64)> = bank
-            .par_iter()
-            .enumerate()
-            .map(|(i, mode)| {
+        let best = Mutex::new(BinaryHeap::with_capacity(keep.min(bank.len()) + 1));
+        let bar = AtomicU64::new(f64::INFINITY.to_bits());
+        // One posing buffer per worker: a body's buffers are megabytes.
+        bank.par_iter().enumerate().try_for_each_init(
+            || self.model.posed_buffers(),
+            |body, (i, mode)| -> Result<(), ReconError> {
                 let mut rotations = mode.rotations.clone();
                 rotations[0] = st.rotation;
-                let body = self.model.pose(
-                    &shaped,
-                    &irmirror_body::Pose {
-                        rotations,
-                        translation: self.mode_root(st, mode),
-                    },
-                )?;
-                Ok((i, self.retrieval_score(&body.vertices, &views, cfg)))
-            })
-            .collect::<Result<_, ReconError>>()?;
-        scored.sort_by(|a, b| a.1.total_cmp(&b.1));
-        Ok(scored)
+                let pose = irmirror_body::Pose {
+                    rotations,
+                    translation: self.mode_root(st, mode),
+                };
+                self.model.pose_surface_into(&shaped, &pose, body)?;
+                let mut score = 0.0;
+                for view in &views {
+                    score += self.view_score(&body.vertices, view, cfg).0;
+                    if score > f64::from_bits(bar.load(AtomicOrdering::Relaxed)) {
+                        return Ok(());
+                    }
+                }
+                let mut heap = best.lock().unwrap_or_else(|e| e.into_inner());
+                heap.push(Scored(score, i));
+                if heap.len() > keep {
+                    heap.pop();
+                }
+                if heap.len() == keep
+                    && let Some(worst) = heap.peek()
+                {
+                    bar.store(worst.0.to_bits(), AtomicOrdering::Relaxed);
+                }
+                Ok(())
+            },
+        )?;
+        Ok(best
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner())
+            .into_sorted_vec()
+            .into_iter()
+            .map(|Scored(score, i)| (i, score))
+            .collect())
     }
 
     /// State `st`'s body on the already shaped `shaped` (the retrieval poses hundreds of
@@ -569,18 +514,19 @@ impl HumanProblem<'_> {
         cfg: &RetrievalConfig,
     ) -> Result<Vec<(HumanState, f64)>, ReconError> {
         let bank = self.pose_bank(usize::MAX, st.height)?;
-        self.candidates_in(st, &bank, cfg)
+        self.candidates_in(st, &bank, cfg, usize::MAX)
     }
 
-    /// [`Self::retrieval_candidates`] among the poses of `bank`.
+    /// [`Self::retrieval_candidates`] among the poses of `bank`, the best `keep` of them.
     pub(super) fn candidates_in(
         &self,
         st: &HumanState,
         bank: &[PoseMode],
         cfg: &RetrievalConfig,
+        keep: usize,
     ) -> Result<Vec<(HumanState, f64)>, ReconError> {
         Ok(self
-            .retrieve(st, bank, cfg)?
+            .retrieve(st, bank, cfg, keep)?
             .into_iter()
             .map(|(i, score)| (self.in_mode(st, &bank[i]), score))
             .collect())
@@ -613,7 +559,7 @@ impl HumanProblem<'_> {
             .map(|st| {
                 Ok(mean_state(
                     st,
-                    &self.candidates_in(st, &bank, cfg)?,
+                    &self.candidates_in(st, &bank, cfg, cfg.mean_of)?,
                     cfg.mean_of,
                 ))
             })
@@ -624,6 +570,30 @@ impl HumanProblem<'_> {
             t0.elapsed().as_secs_f64()
         );
         Ok(out)
+    }
+}
+
+/// A scored pose in the retrieval's running best: ordered by score, then by its index in the
+/// bank (the order a stable sort of the bank by score gives).
+struct Scored(f64, usize);
+
+impl PartialEq for Scored {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+
+impl Eq for Scored {}
+
+impl PartialOrd for Scored {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Scored {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.0.total_cmp(&other.0).then(self.1.cmp(&other.1))
     }
 }
 
@@ -651,7 +621,6 @@ fn mean_state(st: &HumanState, cands: &[(HumanState, f64)], mean_of: usize) -> H
 mod tests {
     use super::*;
 
-    /// The transform's distances are the brute-force Euclidean ones.
     /// A raster that is not one is refused with the field's name.
     #[test]
     fn a_bad_raster_is_refused() {
@@ -703,61 +672,5 @@ mod tests {
             let e = cfg.check().unwrap_err().to_string();
             assert!(e.contains(field), "{e}");
         }
-    }
-
-    #[test]
-    fn the_distance_transform_is_euclidean() {
-        let (w, h) = (9, 6);
-        let seeds = [(1usize, 1usize), (7, 2), (4, 5)];
-        let mut seed = vec![false; w * h];
-        for &(x, y) in &seeds {
-            seed[y * w + x] = true;
-        }
-        let d = distance_to(&seed, w, h);
-        for y in 0..h {
-            for x in 0..w {
-                let want = seeds
-                    .iter()
-                    .map(|&(a, b)| {
-                        ((x as f64 - a as f64).powi(2) + (y as f64 - b as f64).powi(2)).sqrt()
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                assert!(
-                    (d[y * w + x] - want).abs() < 1e-9,
-                    "{x},{y}: {} vs {want}",
-                    d[y * w + x]
-                );
-            }
-        }
-    }
-
-    /// The window the distances are kept on changes none of them: an L-shaped silhouette,
-    /// one arm on the raster's edge, against both transforms of the whole raster.
-    #[test]
-    fn the_windowed_distances_equal_the_whole_rasters() {
-        let (n, cap) = (40, 7.5);
-        let mut sil = vec![false; n * n];
-        for y in 0..n {
-            for x in 0..n {
-                sil[y * n + x] = ((10..16).contains(&x) && (12..30).contains(&y))
-                    || ((24..30).contains(&y) && x < 16);
-            }
-        }
-        let outside: Vec<bool> = sil.iter().map(|s| !s).collect();
-        let (to_sil, to_out) = (distance_to(&sil, n, n), distance_to(&outside, n, n));
-        let d = Distances::new(&sil, n, cap);
-        assert!(
-            d.w < n as i32 && d.h < n as i32,
-            "the window is the whole raster"
-        );
-        for y in 0..n {
-            for x in 0..n {
-                let c = y * n + x;
-                assert_eq!(d.to_sil(x as i32, y as i32), to_sil[c].min(cap), "{x},{y}");
-                assert_eq!(d.to_out(x as i32, y as i32), to_out[c].min(cap), "{x},{y}");
-            }
-        }
-        let none = Distances::new(&vec![false; n * n], n, cap);
-        assert_eq!((none.to_sil(3, 4), none.to_out(3, 4)), (cap, 0.0));
     }
 }
