@@ -96,13 +96,11 @@ impl HumanProblem<'_> {
         rotations: Vec<Matrix3<f64>>,
         shaped: &irmirror_body::ShapedBody<f64>,
     ) -> Result<PoseMode, ReconError> {
-        let body = self.model.pose(
-            shaped,
-            &irmirror_body::Pose {
-                rotations: rotations.clone(),
-                translation: Vector3::zeros(),
-            },
-        )?;
+        let pose = irmirror_body::Pose {
+            rotations,
+            translation: Vector3::zeros(),
+        };
+        let body = self.model.pose(shaped, &pose)?;
         let lowest = body
             .vertices
             .iter()
@@ -111,7 +109,7 @@ impl HumanProblem<'_> {
         Ok(PoseMode {
             latent,
             root_height: -lowest,
-            rotations,
+            rotations: pose.rotations,
         })
     }
 
