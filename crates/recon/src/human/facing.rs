@@ -29,6 +29,7 @@ use super::{HumanConfig, HumanProblem, HumanState, Hypothesis};
 use crate::ReconError;
 use irmirror_body::Region;
 use nalgebra::Vector3;
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 impl HumanProblem<'_> {
@@ -157,11 +158,16 @@ impl HumanProblem<'_> {
         let shaped = super::shaped_body(self.model, &st.build, st.height)?;
         let mut out = [f64::INFINITY; 2];
         for (k, s) in [st.clone(), self.twin(st)?].iter().enumerate() {
-            for (cand, _) in &self.candidates_in(s, bank, cfg, top)? {
-                let body = self.posed_with(&shaped, cand)?;
-                let r = self.thermal_residual(&body.vertices, &views, cfg, (rad, &observed));
-                out[k] = out[k].min(r);
-            }
+            // Each candidate on its own worker (the minimum does not depend on their order).
+            let residuals = self
+                .candidates_in(s, bank, cfg, top)?
+                .par_iter()
+                .map(|(cand, _)| {
+                    let body = self.posed_with(&shaped, cand)?;
+                    Ok(self.thermal_residual(&body.vertices, &views, cfg, (rad, &observed)))
+                })
+                .collect::<Result<Vec<f64>, ReconError>>()?;
+            out[k] = residuals.into_iter().fold(out[k], f64::min);
         }
         Ok(Some(out))
     }

@@ -14,75 +14,121 @@ pub(super) fn ceil_i(x: f64) -> i64 {
     t + i64::from((t as f64) < x)
 }
 
-/// Squared Euclidean distance transform of one line (Felzenszwalb & Huttenlocher).
-fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
-    let n = f.len();
-    let mut k = 0;
-    v[0] = 0;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    for q in 1..n {
-        loop {
-            let p = v[k];
-            let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
-            if s <= z[k] && k > 0 {
-                k -= 1;
-            } else {
-                k += 1;
-                v[k] = q;
-                z[k] = s;
-                z[k + 1] = f64::INFINITY;
-                break;
+/// Distance (cells) from every cell of a `w`×`h` raster (rows of `w`) to the nearest cell
+/// where `seed` is true, truncated at `cap` (`cap` where there is none).
+///
+/// Exact, and cheaper than a full transform because of the truncation: with `k = ⌊cap⌋ + 1`,
+/// a squared distance under `k²` comes from a seed fewer than `k` rows and columns away, and
+/// one of `k²` or more truncates to `cap` (`k > cap`) whatever it is. So along the rows each
+/// cell's squared distance to the nearest seed in its row is found by two scans and clamped
+/// at `k²`; down the columns it is the minimum over the rows within `k − 1` of
+/// `row value + (row offset)²` — whole numbers, exactly those of a full Euclidean transform
+/// wherever they are below `k²` — taken a whole row at a time.
+fn distance_to(seed: &[bool], w: usize, h: usize, cap: f64) -> Vec<f64> {
+    // (A cap beyond the raster truncates nothing but a raster without a seed.)
+    let k = cap.max(0.0).floor().min((w + h) as f64) as usize + 1;
+    let far = (k * k) as f64;
+    let mut g = vec![far; w * h];
+    for (row, out) in seed.chunks_exact(w).zip(g.chunks_exact_mut(w)) {
+        let mut last = None;
+        for (x, (&s, o)) in row.iter().zip(out.iter_mut()).enumerate() {
+            if s {
+                last = Some(x);
+            }
+            if let Some(p) = last {
+                *o = far.min(((x - p) * (x - p)) as f64);
+            }
+        }
+        let mut next = None;
+        for (x, (&s, o)) in row.iter().zip(out.iter_mut()).enumerate().rev() {
+            if s {
+                next = Some(x);
+            }
+            if let Some(p) = next {
+                *o = o.min(((p - x) * (p - x)) as f64);
             }
         }
     }
-    k = 0;
-    for (q, out) in d.iter_mut().enumerate() {
-        while z[k + 1] < q as f64 {
-            k += 1;
+    let mut d = vec![far; w * h];
+    for (q, out) in d.chunks_exact_mut(w).enumerate() {
+        for r in q.saturating_sub(k - 1)..(q + k).min(h) {
+            let step = ((q.abs_diff(r)) * q.abs_diff(r)) as f64;
+            for (o, &f) in out.iter_mut().zip(&g[r * w..(r + 1) * w]) {
+                *o = o.min(f + step);
+            }
         }
-        let p = v[k];
-        *out = (q as f64 - p as f64).powi(2) + f[p];
+        for o in out.iter_mut() {
+            *o = if *o >= far { cap } else { o.sqrt().min(cap) };
+        }
     }
+    d
 }
 
-/// Distance (cells) from every cell of a `w`×`h` raster (rows of `w`) to the nearest cell
-/// where `seed` is true (large where there is none).
-fn distance_to(seed: &[bool], w: usize, h: usize) -> Vec<f64> {
-    const FAR: f64 = 1e12;
-    let mut g: Vec<f64> = seed.iter().map(|&s| if s { 0.0 } else { FAR }).collect();
-    let m = w.max(h);
-    let (mut d, mut v, mut z) = (vec![0.0; m], vec![0; m], vec![0.0; m + 1]);
-    let mut line = vec![0.0; m];
-    for row in 0..h {
-        line[..w].copy_from_slice(&g[row * w..(row + 1) * w]);
-        // A row without a seed is its own transform (every cell FAR + 0).
-        if line[..w].iter().all(|&x| x == FAR) {
-            continue;
-        }
-        edt_1d(&line[..w], &mut d[..w], &mut v, &mut z);
-        g[row * w..(row + 1) * w].copy_from_slice(&d[..w]);
-    }
-    for col in 0..w {
-        for (r, l) in line[..h].iter_mut().enumerate() {
-            *l = g[r * w + col];
-        }
-        edt_1d(&line[..h], &mut d[..h], &mut v, &mut z);
-        for (r, x) in d[..h].iter().enumerate() {
-            g[r * w + col] = x.sqrt();
-        }
-    }
-    g
-}
-
-/// A silhouette's two distance maps (cells), truncated at `cap`, kept only on the window
-/// about it where they can differ from their far values: `cap` to the silhouette and 0 to its
-/// outside (the window reaches `cap` + 1 cells beyond the silhouette, so both are exact).
-pub(super) struct Distances {
+/// A rectangle of raster cells, `w`×`h` from `(x0, y0)`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Window {
     pub(super) x0: i32,
     pub(super) y0: i32,
     pub(super) w: i32,
     pub(super) h: i32,
+}
+
+impl Window {
+    const EMPTY: Self = Self {
+        x0: 0,
+        y0: 0,
+        w: 0,
+        h: 0,
+    };
+
+    /// The box `lo..=hi` grown by `margin` cells each way, clipped to an `n`×`n` raster.
+    fn about(lo: (usize, usize), hi: (usize, usize), margin: usize, n: usize) -> Self {
+        let (x0, y0) = (lo.0.saturating_sub(margin), lo.1.saturating_sub(margin));
+        let (x1, y1) = ((hi.0 + margin).min(n - 1), (hi.1 + margin).min(n - 1));
+        Self {
+            x0: x0 as i32,
+            y0: y0 as i32,
+            w: (x1 - x0 + 1) as i32,
+            h: (y1 - y0 + 1) as i32,
+        }
+    }
+
+    /// Whether cell `(x, y)` lies within `r` cells of the window (each axis).
+    pub(super) fn near(&self, x: i32, y: i32, r: i32) -> bool {
+        x + r >= self.x0 && y + r >= self.y0 && x - r < self.x0 + self.w && y - r < self.y0 + self.h
+    }
+
+    /// The window's index of raster cell `(x, y)`, if it lies in the window.
+    #[inline]
+    fn index(&self, x: i32, y: i32) -> Option<usize> {
+        let (u, v) = (x - self.x0, y - self.y0);
+        (u >= 0 && v >= 0 && u < self.w && v < self.h).then(|| (v * self.w + u) as usize)
+    }
+
+    /// `raster`'s cells (rows of `n`) in the window, mapped by `f`.
+    fn crop(&self, raster: &[bool], n: usize, f: impl Fn(bool) -> bool) -> Vec<bool> {
+        let (x0, w) = (self.x0 as usize, self.w as usize);
+        (self.y0 as usize..(self.y0 + self.h) as usize)
+            .flat_map(|y| raster[y * n + x0..y * n + x0 + w].iter().map(|&s| f(s)))
+            .collect()
+    }
+
+    /// Distances to the cells where `seed` (the window's cells) holds, truncated at `cap`.
+    fn distances(&self, seed: &[bool], cap: f64) -> Vec<f64> {
+        distance_to(seed, self.w as usize, self.h as usize, cap)
+    }
+}
+
+/// A silhouette's two distance maps (cells), truncated at `cap`, each kept only on the window
+/// where it can differ from its far value: `cap` to the silhouette (the window reaches `cap` +
+/// 1 cells beyond the silhouette), 0 to its outside (the silhouette's box and one ring of
+/// outside cells: a cell of the box has its nearest outside cell there, clamping any other
+/// into the ring brings it nearer). Both are exact.
+pub(super) struct Distances {
+    /// Where the distance to the silhouette is kept.
+    pub(super) sil: Window,
+    /// Where the distance to the outside is kept.
+    pub(super) out: Window,
     to_sil: Vec<f64>,
     to_out: Vec<f64>,
     cap: f64,
@@ -98,55 +144,33 @@ impl Distances {
         }
         if lo.0 > hi.0 {
             return Self {
-                x0: 0,
-                y0: 0,
-                w: 0,
-                h: 0,
+                sil: Window::EMPTY,
+                out: Window::EMPTY,
                 to_sil: Vec::new(),
                 to_out: Vec::new(),
                 cap,
             };
         }
-        let margin = cap.ceil() as usize + 1;
-        let (x0, y0) = (lo.0.saturating_sub(margin), lo.1.saturating_sub(margin));
-        let (x1, y1) = ((hi.0 + margin).min(n - 1), (hi.1 + margin).min(n - 1));
-        let (w, h) = (x1 - x0 + 1, y1 - y0 + 1);
-        let crop: Vec<bool> = (y0..=y1)
-            .flat_map(|y| sil[y * n + x0..=y * n + x1].iter().copied())
-            .collect();
-        let outside: Vec<bool> = crop.iter().map(|s| !s).collect();
+        let near = Window::about(lo, hi, cap.ceil() as usize + 1, n);
+        let inner = Window::about(lo, hi, 1, n);
         Self {
-            x0: x0 as i32,
-            y0: y0 as i32,
-            w: w as i32,
-            h: h as i32,
             // Truncated once here: the shifts' loop reads each cell many times.
-            to_sil: distance_to(&crop, w, h)
-                .into_iter()
-                .map(|d| d.min(cap))
-                .collect(),
-            to_out: distance_to(&outside, w, h)
-                .into_iter()
-                .map(|d| d.min(cap))
-                .collect(),
+            to_sil: near.distances(&near.crop(sil, n, |s| s), cap),
+            to_out: inner.distances(&inner.crop(sil, n, |s| !s), cap),
+            sil: near,
+            out: inner,
             cap,
         }
     }
 
-    /// The window's index of raster cell `(x, y)`, if it lies in the window.
-    fn index(&self, x: i32, y: i32) -> Option<usize> {
-        let (u, v) = (x - self.x0, y - self.y0);
-        (u >= 0 && v >= 0 && u < self.w && v < self.h).then(|| (v * self.w + u) as usize)
-    }
-
-    /// Distance to the silhouette, truncated (a cell beyond the window: `cap`).
+    /// Distance to the silhouette, truncated (a cell beyond its window: `cap`).
     pub(super) fn to_sil(&self, x: i32, y: i32) -> f64 {
-        self.index(x, y).map_or(self.cap, |i| self.to_sil[i])
+        self.sil.index(x, y).map_or(self.cap, |i| self.to_sil[i])
     }
 
-    /// Distance to the silhouette's outside, truncated (a cell beyond the window: 0).
+    /// Distance to the silhouette's outside, truncated (a cell beyond its window: 0).
     pub(super) fn to_out(&self, x: i32, y: i32) -> f64 {
-        self.index(x, y).map_or(0.0, |i| self.to_out[i])
+        self.out.index(x, y).map_or(0.0, |i| self.to_out[i])
     }
 }
 
@@ -169,30 +193,40 @@ mod tests {
         assert_eq!(ceil_i(-1e30), i64::MIN);
     }
 
-    /// The transform's distances are the brute-force Euclidean ones.
+    /// The brute-force distance from `(x, y)` to the nearest seed of a `w`-wide raster, truncated.
+    fn brute(seed: &[bool], w: usize, (x, y): (usize, usize), cap: f64) -> f64 {
+        seed.iter()
+            .enumerate()
+            .filter(|(_, s)| **s)
+            .map(|(c, _)| {
+                let (a, b) = ((c % w) as f64, (c / w) as f64);
+                ((x as f64 - a).powi(2) + (y as f64 - b).powi(2)).sqrt()
+            })
+            .fold(f64::INFINITY, f64::min)
+            .min(cap)
+    }
+
+    /// The truncated transform's distances are the brute-force Euclidean ones, to the bit, at
+    /// caps below, on and above whole cells, and far beyond the raster; a raster without a
+    /// seed is `cap` everywhere.
     #[test]
     fn the_distance_transform_is_euclidean() {
-        let (w, h) = (9, 6);
-        let seeds = [(1usize, 1usize), (7, 2), (4, 5)];
-        let mut seed = vec![false; w * h];
-        for &(x, y) in &seeds {
-            seed[y * w + x] = true;
-        }
-        let d = distance_to(&seed, w, h);
-        for y in 0..h {
-            for x in 0..w {
-                let want = seeds
-                    .iter()
-                    .map(|&(a, b)| {
-                        ((x as f64 - a as f64).powi(2) + (y as f64 - b as f64).powi(2)).sqrt()
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                assert!(
-                    (d[y * w + x] - want).abs() < 1e-9,
-                    "{x},{y}: {} vs {want}",
-                    d[y * w + x]
-                );
+        let (w, h) = (23, 17);
+        let mut rng = irmirror_geom::rng::seeded(5, 0);
+        let seed: Vec<bool> = (0..w * h)
+            .map(|_| rand::Rng::random::<f64>(&mut rng) < 0.03)
+            .collect();
+        assert!(seed.iter().filter(|s| **s).count() >= 4);
+        for cap in [0.5, 1.0, 2.5, 0.15 / 0.02, 7.5, 9.0, 1e3, 1e20] {
+            let d = distance_to(&seed, w, h, cap);
+            for y in 0..h {
+                for x in 0..w {
+                    let want = brute(&seed, w, (x, y), cap);
+                    assert_eq!(d[y * w + x], want, "cap {cap}, {x},{y}");
+                }
             }
+            let none = distance_to(&vec![false; w * h], w, h, cap);
+            assert!(none.iter().all(|&d| d == cap), "cap {cap}");
         }
     }
 
@@ -209,17 +243,17 @@ mod tests {
             }
         }
         let outside: Vec<bool> = sil.iter().map(|s| !s).collect();
-        let (to_sil, to_out) = (distance_to(&sil, n, n), distance_to(&outside, n, n));
         let d = Distances::new(&sil, n, cap);
         assert!(
-            d.w < n as i32 && d.h < n as i32,
-            "the window is the whole raster"
+            d.sil.w < n as i32 && d.sil.h < n as i32 && d.out.w < d.sil.w,
+            "the windows are the whole raster"
         );
         for y in 0..n {
             for x in 0..n {
-                let c = y * n + x;
-                assert_eq!(d.to_sil(x as i32, y as i32), to_sil[c].min(cap), "{x},{y}");
-                assert_eq!(d.to_out(x as i32, y as i32), to_out[c].min(cap), "{x},{y}");
+                let (to_sil, to_out) =
+                    (brute(&sil, n, (x, y), cap), brute(&outside, n, (x, y), cap));
+                assert_eq!(d.to_sil(x as i32, y as i32), to_sil, "{x},{y}");
+                assert_eq!(d.to_out(x as i32, y as i32), to_out, "{x},{y}");
             }
         }
         let none = Distances::new(&vec![false; n * n], n, cap);

@@ -178,9 +178,12 @@ impl RetrievalConfig {
 pub(super) struct View {
     pub(super) centre: Vector3<f64>,
     pub(super) axis: Vector3<f64>,
-    e_u: Vector3<f64>,
-    e_v: Vector3<f64>,
-    root: Vector3<f64>,
+    /// The plane's axes in cells per metre: `e_u / cell_m`, `e_v / cell_m`.
+    to_u: Vector3<f64>,
+    to_v: Vector3<f64>,
+    /// The raster coordinates of the centre's foot on the plane (the root, up to rounding):
+    /// `((centre − root) · e + half_width_m) / cell_m` per axis.
+    offset: (f64, f64),
     /// The root's distance along the axis from the centre: `(root − centre) · axis`.
     depth: f64,
     /// Raster cells of the mask rays' plane points.
@@ -193,17 +196,19 @@ pub(super) struct View {
 
 impl View {
     /// `p`'s raster cell in the plane, projected from the centre (`None`: behind the centre).
+    /// The point on the plane is `centre + (p − centre) s` with `s = depth / along`, so its
+    /// raster coordinates are `s (p − centre) · to + offset`: one division a vertex.
     #[inline]
-    fn project(&self, p: &Vector3<f64>, cfg: &RetrievalConfig) -> Option<(f64, f64)> {
-        let along = (p - self.centre).dot(&self.axis);
+    fn project(&self, p: &Vector3<f64>) -> Option<(f64, f64)> {
+        let d = p - self.centre;
+        let along = d.dot(&self.axis);
         if along < 1e-3 {
             return None;
         }
         let s = self.depth / along;
-        let q = self.centre + (p - self.centre) * s - self.root;
         Some((
-            (q.dot(&self.e_u) + cfg.half_width_m) / cfg.cell_m,
-            (q.dot(&self.e_v) + cfg.half_width_m) / cfg.cell_m,
+            s * d.dot(&self.to_u) + self.offset.0,
+            s * d.dot(&self.to_v) + self.offset.1,
         ))
     }
 }
@@ -239,9 +244,12 @@ impl HumanProblem<'_> {
                 let mut view = View {
                     centre,
                     axis,
-                    e_u,
-                    e_v,
-                    root: *root,
+                    to_u: e_u / cfg.cell_m,
+                    to_v: e_v / cfg.cell_m,
+                    offset: (
+                        ((centre - root).dot(&e_u) + cfg.half_width_m) / cfg.cell_m,
+                        ((centre - root).dot(&e_v) + cfg.half_width_m) / cfg.cell_m,
+                    ),
                     depth: (root - centre).dot(&axis),
                     mask: Vec::new(),
                     mask_ray: Vec::new(),
@@ -312,7 +320,7 @@ impl HumanProblem<'_> {
         let mut at = Vec::with_capacity(vertices.len());
         let mut span = Vec::with_capacity(vertices.len());
         for v in vertices {
-            let p = view.project(v, cfg);
+            let p = view.project(v);
             span.push(p.map_or([0, -1, 0, -1], |(u, w)| {
                 [
                     cell(ceil_i(u - 0.5)),
@@ -323,15 +331,28 @@ impl HumanProblem<'_> {
             }));
             at.push(p);
         }
-        for (t, face) in self.model.asset.faces.iter().enumerate() {
+        // The triangles whose cell range is not empty, listed without a branch: which of them
+        // cover a centre is as good as random, and a mispredicted branch a triangle cost more
+        // than the test.
+        let faces = &self.model.asset.faces;
+        let mut hit = vec![0u32; faces.len() + 1];
+        let mut m = 0;
+        for (t, face) in faces.iter().enumerate() {
             let [a, b, c] = face.map(|i| span[i as usize]);
             let x0 = a[0].min(b[0]).min(c[0]).max(0);
             let x1 = a[1].max(b[1]).max(c[1]).min(last);
             let y0 = a[2].min(b[2]).min(c[2]).max(0);
             let y1 = a[3].max(b[3]).max(c[3]).min(last);
-            if x0 > x1 || y0 > y1 {
-                continue;
-            }
+            hit[m] = t as u32;
+            m += usize::from((x0 <= x1) & (y0 <= y1));
+        }
+        for &t in &hit[..m] {
+            let (t, face) = (t as usize, &faces[t as usize]);
+            let [a, b, c] = face.map(|i| span[i as usize]);
+            let x0 = a[0].min(b[0]).min(c[0]).max(0);
+            let x1 = a[1].max(b[1]).max(c[1]).min(last);
+            let y0 = a[2].min(b[2]).min(c[2]).max(0);
+            let y1 = a[3].max(b[3]).max(c[3]).min(last);
             // A corner behind the view's centre: the triangle is not drawn.
             let [Some(a), Some(b), Some(c)] = face.map(|i| at[i as usize]) else {
                 continue;
@@ -384,18 +405,14 @@ impl HumanProblem<'_> {
         let reach = (cfg.shift_m / cfg.cell_m / f64::from(step)).round() as i32;
         let cap = cfg.truncate_m / cfg.cell_m;
         let dist = Distances::new(&self.silhouette(vertices, view, cfg), n, cap);
-        // Only the rays outside the mask that some shift brings into the window can spill.
+        // Only the rays outside the mask that some shift brings into the silhouette's box can
+        // spill.
         let r = reach * step;
         let near: Vec<(i32, i32)> = view
             .empty
             .iter()
             .copied()
-            .filter(|&(x, y)| {
-                x + r >= dist.x0
-                    && y + r >= dist.y0
-                    && x - r < dist.x0 + dist.w
-                    && y - r < dist.y0 + dist.h
-            })
+            .filter(|&(x, y)| dist.out.near(x, y, r))
             .collect();
         let mut best = (f64::INFINITY, (0, 0));
         for du in (-reach..=reach).map(|k| k * step) {
