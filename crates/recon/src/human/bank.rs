@@ -81,26 +81,37 @@ impl HumanProblem<'_> {
         rotvecs: &[[f64; 3]],
         shaped: &irmirror_body::ShapedBody<f64>,
     ) -> Result<PoseMode, ReconError> {
+        self.pose_mode_into(rotvecs, shaped, &mut self.model.posed_buffers())
+    }
+
+    /// [`Self::pose_mode`], the surface posed into `body` (a caller making many reuses it).
+    fn pose_mode_into(
+        &self,
+        rotvecs: &[[f64; 3]],
+        shaped: &irmirror_body::ShapedBody<f64>,
+        body: &mut irmirror_body::PosedBody<f64>,
+    ) -> Result<PoseMode, ReconError> {
         let latent = self.prior.encode(rotvecs)?;
         let mut rotations = self.prior.decode(&latent)?;
         // Anny's own frame is Z up: the identity root stands upright.
         rotations[0] = Matrix3::identity();
-        self.mode_at(latent, rotations, shaped)
+        self.mode_at(latent, rotations, shaped, body)
     }
 
     /// The mode of a decoded pose (`rotations`, root identity) on the rest body `shaped`: its
-    /// root's height above the lowest vertex measured.
+    /// root's height above the lowest vertex measured, the surface posed into `body`.
     fn mode_at(
         &self,
         latent: Vec<f64>,
         rotations: Vec<Matrix3<f64>>,
         shaped: &irmirror_body::ShapedBody<f64>,
+        body: &mut irmirror_body::PosedBody<f64>,
     ) -> Result<PoseMode, ReconError> {
         let pose = irmirror_body::Pose {
             rotations,
             translation: Vector3::zeros(),
         };
-        let body = self.model.pose(shaped, &pose)?;
+        self.model.pose_surface_into(shaped, &pose, body)?;
         let lowest = body
             .vertices
             .iter()
@@ -121,7 +132,10 @@ impl HumanProblem<'_> {
     ) -> Result<Vec<PoseMode>, ReconError> {
         let shaped = super::shaped_body(self.model, &self.build, height)?;
         bank.par_iter()
-            .map(|m| self.mode_at(m.latent.clone(), m.rotations.clone(), &shaped))
+            .map_init(
+                || self.model.posed_buffers(),
+                |body, m| self.mode_at(m.latent.clone(), m.rotations.clone(), &shaped, body),
+            )
             .collect()
     }
 
@@ -160,7 +174,10 @@ impl HumanProblem<'_> {
         let shaped = super::shaped_body(self.model, &self.build, height)?;
         farthest_points(&poses, n)
             .into_par_iter()
-            .map(|i| self.pose_mode(&poses[i], &shaped))
+            .map_init(
+                || self.model.posed_buffers(),
+                |body, i| self.pose_mode_into(&poses[i], &shaped, body),
+            )
             .collect()
     }
 
