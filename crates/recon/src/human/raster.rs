@@ -1,5 +1,5 @@
-//! The virtual view's raster ([`super::retrieve`]): distance transforms of a silhouette, kept
-//! on a window about it, and cell rounding without the library call.
+//! The virtual view's raster ([`super::retrieve`]): truncated distance transforms of a silhouette,
+//! each kept on a window about it, and cell rounding without the library call.
 
 /// `x.floor()` as an integer, without the library call (exact for |x| < 2⁶³; saturates beyond,
 /// far off any raster).
