@@ -67,10 +67,10 @@ fn distance_to(seed: &[bool], w: usize, h: usize, cap: f64) -> Vec<f64> {
 /// A rectangle of raster cells, `w`×`h` from `(x0, y0)`.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Window {
-    pub(super) x0: i32,
-    pub(super) y0: i32,
-    pub(super) w: i32,
-    pub(super) h: i32,
+    x0: i32,
+    y0: i32,
+    w: i32,
+    h: i32,
 }
 
 impl Window {
@@ -126,7 +126,7 @@ impl Window {
 /// into the ring brings it nearer). Both are exact.
 pub(super) struct Distances {
     /// Where the distance to the silhouette is kept.
-    pub(super) sil: Window,
+    sil: Window,
     /// Where the distance to the outside is kept.
     pub(super) out: Window,
     to_sil: Vec<f64>,

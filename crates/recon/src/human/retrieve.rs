@@ -333,9 +333,10 @@ impl HumanProblem<'_> {
         }
         // The triangles whose cell range is not empty, listed without a branch: which of them
         // cover a centre is as good as random, and a mispredicted branch a triangle cost more
-        // than the test.
+        // than the test. The few listed make their range again below (cheaper than writing
+        // every triangle's range here).
         let faces = &self.model.asset.faces;
-        let mut hit = vec![0u32; faces.len() + 1];
+        let mut hit = vec![0u32; faces.len()];
         let mut m = 0;
         for (t, face) in faces.iter().enumerate() {
             let [a, b, c] = face.map(|i| span[i as usize]);
@@ -343,7 +344,7 @@ impl HumanProblem<'_> {
             let x1 = a[1].max(b[1]).max(c[1]).min(last);
             let y0 = a[2].min(b[2]).min(c[2]).max(0);
             let y1 = a[3].max(b[3]).max(c[3]).min(last);
-            hit[m] = t as u32;
+            hit[m] = t as u32; // m ≤ t: in bounds
             m += usize::from((x0 <= x1) & (y0 <= y1));
         }
         for &t in &hit[..m] {
