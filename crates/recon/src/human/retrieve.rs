@@ -63,8 +63,11 @@ pub struct RetrievalConfig {
     /// but facing within 30° stays 13, per-vertex −0.011 ± 0.033 m (paired), and stage 2
     /// takes several times as long (README, "Twenty-fourth run"); on 12 held-out cars, where
     /// the judge picks the true facing at the truth on 8 and on the fits' hypotheses on 14 of
-    /// 25, facing within 30° 9 → 4 (README, "Twenty-fifth run"). Off, the judge still acts
-    /// where the reflection shows no head (`facing_head_share`).
+    /// 25, facing within 30° 9 → 4 (README, "Twenty-fifth run"). Retried at the judge's cost
+    /// since: tuning bowls' successes 9 → 13, held-out bowls' 10 → 10 (facing within 30° 11 →
+    /// 13), the tuning hard view's 4 → 0, stage 2 1.25–2× as long (README, "Thirty-sixth
+    /// run"). Off, the judge still acts where the reflection shows no head
+    /// (`facing_head_share`).
     pub facing: bool,
     /// The judge compares the best of this many outline-ranked poses per facing. 10 against
     /// 30: held-out mugs facing within 30° 8 → 11, per-vertex −0.044 ± 0.072 m (paired),
