@@ -158,7 +158,7 @@ pub struct SearchConfig {
     /// root turned so an orthographic view along the objects→person line is unchanged) rather
     /// than its root turned 180° (`flipped`). Off:
     /// on 24 held-out mugs successes 0 → 4, on 24 bowls 10 → 7 (README, "Seventeenth run");
-    /// retried with the judge on: tuning bowls 9 → 11, held-out bowls 10 → 6, tuning mugs
+    /// retried since (successes): tuning bowls 9 → 11, held-out bowls 10 → 6, tuning mugs
     /// 5 → 4, tuning hard view 4 → 0 (README, "Thirty-sixth run").
     pub twin_flips: bool,
 }
