@@ -15,6 +15,7 @@
 //! run"), whose roots lie along the objects→person line.
 
 use super::limbs::Polished;
+use super::problem::FullEval;
 use super::search::Refined;
 use super::{HumanConfig, HumanProblem, HumanState, Stratified};
 use crate::ReconError;
@@ -32,12 +33,23 @@ fn polish_best(
     polish: impl FnOnce(&[HumanState]) -> Result<Vec<Option<Polished>>, ReconError>,
 ) -> Result<(), ReconError> {
     let t0 = std::time::Instant::now();
-    let mut order: Vec<(usize, f64)> = refined
+    // The evaluations stay with the hypotheses not polished (the thermal polish and the final
+    // scoring read them).
+    let evals: Vec<(usize, FullEval)> = refined
         .par_iter()
         .enumerate()
         .filter_map(|(i, r)| r.as_ref().map(|r| (i, r)))
-        .map(|(i, r)| Ok((i, problem.full_eval(&r.state, cfg)?.loss)))
+        .map(|(i, r)| match &r.eval {
+            Some(e) => Ok((i, e.clone())),
+            None => Ok((i, problem.full_eval(&r.state, cfg)?)),
+        })
         .collect::<Result<_, ReconError>>()?;
+    let mut order: Vec<(usize, f64)> = evals.iter().map(|(i, e)| (*i, e.loss)).collect();
+    for (i, e) in evals {
+        if let Some(r) = refined[i].as_mut() {
+            r.eval = Some(e);
+        }
+    }
     order.sort_by(|a, b| a.1.total_cmp(&b.1));
     order.truncate(n);
     let states: Vec<HumanState> = order
@@ -56,9 +68,9 @@ fn polish_best(
     Ok(())
 }
 
-/// The polishes `cfg.search` asks for (limb, yaw, place: [`polish_best`] each), in that
-/// order, on the refined hypotheses; `(edge_dist, sample)` and `seed` as the refinement takes
-/// them.
+/// The polishes `cfg.search` asks for (limb, yaw — [`super::SearchConfig::yaw_polishes`] —, place:
+/// [`polish_best`] each), in that order, on the refined hypotheses; `(edge_dist, sample)` and
+/// `seed` as the refinement takes them (`sample`: the fixed batch, when there is one).
 pub(super) fn polish_refined(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
@@ -72,8 +84,9 @@ pub(super) fn polish_refined(
             problem.limb_polish(states, cfg, edge_dist, sample, seed)
         })?;
     }
-    if s.yaw_polish > 0 {
-        polish_best(problem, cfg, (s.yaw_polish, "yaw"), refined, |states| {
+    let yaw = s.yaw_polishes(sample.is_some());
+    if yaw > 0 {
+        polish_best(problem, cfg, (yaw, "yaw"), refined, |states| {
             problem.yaw_polish(states, cfg, (edge_dist, sample), seed)
         })?;
     }

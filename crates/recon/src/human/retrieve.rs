@@ -49,6 +49,8 @@ pub struct RetrievalConfig {
     /// the refinement. Off: on 24 held-out bowls with `mean_of = 30` root median 0.148 →
     /// 0.092 m but per-vertex +0.049 ± 0.055 m (paired), successes 10 → 9; retrieving the
     /// partners' poses too, +0.071 ± 0.059 m, successes 7 (README, "Twenty-third run").
+    /// Retried since: held-out bowls per-vertex +0.049 ± 0.046 m, successes 10 → 8; tuning
+    /// bowls root median 0.101 → 0.121 m (README, "Thirty-seventh run").
     pub survivors: bool,
     /// The most rays outside the mask scored per object (evenly strided).
     pub max_empty_rays: usize,
