@@ -68,9 +68,10 @@ fn polish_best(
     Ok(())
 }
 
-/// The polishes `cfg.search` asks for (limb, yaw — [`super::SearchConfig::yaw_polishes`] —, place:
-/// [`polish_best`] each), in that order, on the refined hypotheses; `(edge_dist, sample)` and
-/// `seed` as the refinement takes them (`sample`: the fixed batch, when there is one).
+/// The polishes `cfg.search` asks for (limb, yaw — as [`super::SearchConfig::yaw_polishes`]
+/// says —, place: [`polish_best`] each), in that order, on the refined hypotheses;
+/// `(edge_dist, sample)` and `seed` as the refinement takes them (`sample`: the fixed batch,
+/// when there is one).
 pub(super) fn polish_refined(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
