@@ -39,10 +39,7 @@ fn polish_best(
         .par_iter()
         .enumerate()
         .filter_map(|(i, r)| r.as_ref().map(|r| (i, r)))
-        .map(|(i, r)| match &r.eval {
-            Some(e) => Ok((i, e.clone())),
-            None => Ok((i, problem.full_eval(&r.state, cfg)?)),
-        })
+        .map(|(i, r)| Ok((i, r.evaluated(problem, cfg)?)))
         .collect::<Result<_, ReconError>>()?;
     let mut order: Vec<(usize, f64)> = evals.iter().map(|(i, e)| (*i, e.loss)).collect();
     for (i, e) in evals {

@@ -466,6 +466,20 @@ pub(super) struct Refined {
     pub(super) eval: Option<FullEval>,
 }
 
+impl Refined {
+    /// Its evaluation on all rays: the one kept, or made now.
+    pub(super) fn evaluated(
+        &self,
+        problem: &HumanProblem<'_>,
+        cfg: &HumanConfig,
+    ) -> Result<FullEval, ReconError> {
+        match &self.eval {
+            Some(e) => Ok(e.clone()),
+            None => problem.full_eval(&self.state, cfg),
+        }
+    }
+}
+
 /// The thermal polish: `polish_iterations` steps on the rise for the best `polish_best` refined
 /// hypotheses by the rise (all when 0) and the best one's front/back partner, in parallel;
 /// their loss curves extended. A polish that diverges drops its hypothesis.
@@ -485,10 +499,7 @@ fn polish_rise(
         // Rank on the rise; the evaluations stay with the hypotheses not polished.
         let evals: Vec<FullEval> = live
             .par_iter()
-            .map(|&i| match &refined[i].as_ref().expect("live").eval {
-                Some(e) => Ok(e.clone()),
-                None => problem.full_eval(&refined[i].as_ref().expect("live").state, cfg),
-            })
+            .map(|&i| refined[i].as_ref().expect("live").evaluated(problem, cfg))
             .collect::<Result<_, ReconError>>()?;
         let mut order: Vec<(usize, f64)> =
             live.iter().zip(&evals).map(|(&i, e)| (i, e.data)).collect();
@@ -629,12 +640,11 @@ pub fn fit_human(
     let mut scored: Vec<(Hypothesis, HumanState)> = done
         .into_par_iter()
         .map(|r| {
-            let st = r.state;
-            let eval = match r.eval {
-                Some(e) => e,
-                None => problem.full_eval(&st, cfg)?,
-            };
-            Ok((hypothesis(problem, cfg, r.init, &st, eval, r.curve)?, st))
+            let eval = r.evaluated(problem, cfg)?;
+            Ok((
+                hypothesis(problem, cfg, r.init, &r.state, eval, r.curve)?,
+                r.state,
+            ))
         })
         .collect::<Result<_, ReconError>>()?;
     scored.sort_by(|a, b| a.0.loss.total_cmp(&b.0.loss));
