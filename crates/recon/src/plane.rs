@@ -74,8 +74,8 @@ pub const PLANE_BLOCK_M: f64 = 0.6;
 /// The support plane as an occluder of the objects' reflected rays, known where the depth camera
 /// sees it. A table is finite and its edge is often out of the cameras' view: on the paper-like
 /// tabletop the cameras stand near the table's edge, and a mug's side sends rays back over that
-/// edge, below the depth camera's view, to a person's hands and hips (README, "Eleventh run":
-/// every mask pixel of tuning mug 21000 was dropped so, "nobody there").
+/// edge, below the depth camera's view, to a person's hands and hips (EXPERIMENTS.md, "Eleventh
+/// run": every mask pixel of tuning mug 21000 was dropped so, "nobody there").
 #[derive(Clone, Copy)]
 pub struct PlaneOccluder<'a> {
     /// The plane (depth frame).
@@ -105,7 +105,7 @@ impl PlaneOccluder<'_> {
     /// reflection (its warmth says the ray passed; a cold pixel's ray may be blocked, so it is
     /// left out, as before). Not "out of view = no table": the table runs on under the cameras
     /// out of view, and letting every such ray pass raised the truth's data term on 24 tuning
-    /// mugs from 0.074 to 0.445 (median; README, "Thirty-second run").
+    /// mugs from 0.074 to 0.445 (median; EXPERIMENTS.md, "Thirty-second run").
     pub fn blocks(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, pixel: u32) -> bool {
         let n = self.plane.n();
         let denom = n.dot(dir);

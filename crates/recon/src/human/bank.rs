@@ -3,15 +3,15 @@
 //! The search's grid places and turns the body in three pose modes; its rounds then move the
 //! pose by gradient steps, which stay in the basin of the mode they started from. Placed at the
 //! true root and facing, refinement from a template ended at twice the data term it reached
-//! from the prior's encoding of the true pose (held-out bowls: 0.34–0.36 against 0.18, README
-//! "Fourteenth run"): the pose's local minima, not the place, held the bowls' fits. So each
-//! survivor is also tried in `pose_bank` poses spread over what the prior was trained on — the
-//! real poses of `assets/poses/mocap_deepmimic.safetensors` and their mirror images, and the
+//! from the prior's encoding of the true pose (held-out bowls: 0.34–0.36 against 0.18,
+//! EXPERIMENTS.md "Fourteenth run"): the pose's local minima, not the place, held the bowls' fits.
+//! So each survivor is also tried in `pose_bank` poses spread over what the prior was trained on —
+//! the real poses of `assets/poses/mocap_deepmimic.safetensors` and their mirror images, and the
 //! activity templates (never the benchmark's persons) — chosen by farthest-point sampling in
 //! joint-rotation space. Each is scored at the survivor's root and facing (its feet moved to the
 //! floor when the floor is known) with one forward pass; the best `bank_keep` per survivor take
 //! the last round's steps, and the best of them replaces the survivor if its loss after those
-//! steps is lower than the survivor's (held-out figures: README, "Fifteenth run").
+//! steps is lower than the survivor's (held-out figures: EXPERIMENTS.md, "Fifteenth run").
 
 use super::{HumanConfig, HumanProblem, HumanState};
 use crate::ReconError;

@@ -5,7 +5,7 @@
 //! The thermal image does not: a face is warmer than the hair on the back of a head, and a
 //! bare forearm in front of the torso shows where one behind it is hidden. The data term
 //! holds that cue, but only where the pose is nearly right: a fit's misplaced head and arms
-//! drown it (README, "Twenty-fourth run"). So the facing is judged as the retrieval
+//! drown it (EXPERIMENTS.md, "Twenty-fourth run"). So the facing is judged as the retrieval
 //! ([`super::retrieve`]) judges a pose — in the virtual view, with a tolerance: at a state's
 //! root and facing, and at its twin's, the source poses whose outlines fit best are drawn with
 //! their body regions (the nearest surface along the view's axis in each 2 cm cell), each
@@ -20,7 +20,7 @@
 //! such held-out bowls) and the judge's turns gained nothing on bowls and cost the hard view and
 //! the cars; where the mirror sees a band of clothing (a mug), the data term cannot (5 of 20)
 //! and the judge turned the mugs' facing right more often on both the tuning and the held-out
-//! set (README, "Thirty-third run").
+//! set (EXPERIMENTS.md, "Thirty-third run").
 
 use super::bank::PoseMode;
 use super::radiometric::Radiometry;

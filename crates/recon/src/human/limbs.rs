@@ -2,18 +2,18 @@
 //!
 //! Placed at the true root and facing, refinements from the search's templates ended at
 //! 0.30–0.33 data term on held-out bowls where the prior's encoding of the true pose reached
-//! 0.18 (README, "Sixteenth run"), and the pose bank ([`super::bank`]) tries whole poses: a
-//! person's legs, arms and head seldom match one training pose together. So each survivor's pose is changed part by part — left leg, right
-//! leg, torso, left arm, right arm, head — each tried in `limb_options` configurations spread
-//! (farthest-point sampling, that part's joints alone) over the same source poses as the bank's,
-//! the rest kept; a change is kept when it lowers the score (one forward pass per try, the feet
-//! moved to the floor when it is known), sweep after sweep (coordinate descent on a discrete
-//! set). The pose tried is encoded by the prior, as every pose the search states. The result
-//! then takes the last round's steps and replaces the survivor when its loss is lower; or,
-//! as a polish of refined hypotheses, the full refinement. Placed at the true root and facing
-//! it reaches near the prior's encoding of the true pose; in the pipeline it lowers the loss
-//! of whichever facing it is handed and recovered no more people, so both uses are off by
-//! default (README, "Seventeenth run").
+//! 0.18 (EXPERIMENTS.md, "Sixteenth run"), and the pose bank ([`super::bank`]) tries whole poses: a
+//! person's legs, arms and head seldom match one training pose together. So each survivor's pose is
+//! changed part by part — left leg, right leg, torso, left arm, right arm, head — each tried in
+//! `limb_options` configurations spread (farthest-point sampling, that part's joints alone) over
+//! the same source poses as the bank's, the rest kept; a change is kept when it lowers the score
+//! (one forward pass per try, the feet moved to the floor when it is known), sweep after sweep
+//! (coordinate descent on a discrete set). The pose tried is encoded by the prior, as every pose
+//! the search states. The result then takes the last round's steps and replaces the survivor when
+//! its loss is lower; or, as a polish of refined hypotheses, the full refinement. Placed at the
+//! true root and facing it reaches near the prior's encoding of the true pose; in the pipeline it
+//! lowers the loss of whichever facing it is handed and recovered no more people, so both uses are
+//! off by default (EXPERIMENTS.md, "Seventeenth run").
 
 use super::bank::farthest_points;
 use super::{HumanConfig, HumanProblem, HumanState};

@@ -28,15 +28,15 @@
 //!   stratum's rays with probability ∝ `(1 − α) + α exp(−e/τ)` at the curriculum's final
 //!   `edge_mix` and `edge_tau_px[1]`, importance-weighted: the same loss, estimated with more of
 //!   the rays that decide the outline. Ablated: a uniform stratified batch. With
-//!   `refine_rays` = 0 (the paper's refinement), each iteration draws `rays_per_iteration` rays without replacement with
-//!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
-//!   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the iterations (curriculum).
-//!   Ablated: uniform draws of the same count. With the mask's data term the draws are made
-//!   among the **active set** only (`active_margin_m`): the mask's rays and those passing within
-//!   that margin of the body, refreshed every `active_every` steps, at most `max_ray_fraction`
-//!   of them. The other rays have occupancy ≈ 0 and target 0 and add nothing to the soft IoU,
-//!   yet were 98 % of a draw on a car door (a 2,500-pixel reflection among 150,000 object
-//!   pixels: ≈ 50 mask rays per step).
+//! `refine_rays` = 0 (the paper's refinement), each iteration draws `rays_per_iteration` rays
+//! without replacement with   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's
+//! edge; α grows from 0 to   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the
+//! iterations (curriculum).   Ablated: uniform draws of the same count. With the mask's data term
+//! the draws are made   among the **active set** only (`active_margin_m`): the mask's rays and
+//! those passing within   that margin of the body, refreshed every `active_every` steps, at most
+//! `max_ray_fraction`   of them. The other rays have occupancy ≈ 0 and target 0 and add nothing to
+//! the soft IoU,   yet were 98 % of a draw on a car door (a 2,500-pixel reflection among 150,000
+//! object   pixels: ≈ 50 mask rays per step).
 //! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
 //! * **Global search, then refinement** ([`search`]): candidates over the full circle of facing
 //!   directions × distances along the mask's reflected rays × pose-prior modes, scored cheaply
@@ -136,8 +136,8 @@ pub struct HumanConfig {
     pub w_residual: f64,
     /// When > 0, on a reflection of `n` > `residual_ref_px` pixels with rays the residual's
     /// prior weighs `w_residual × residual_ref_px / n` ([`HumanProblem::prior_weighted`]).
-    /// Off (0) by default: at 500 it helped the tuning cars and not the held-out ones (README,
-    /// "Tenth run").
+    /// Off (0) by default: at 500 it helped the tuning cars and not the held-out ones
+    /// (EXPERIMENTS.md, "Tenth run").
     pub residual_ref_px: f64,
     /// Weight of the upright prior `1 − (R ẑ)·n` (people stand on the support plane's side:
     /// Anny's up should follow the plane normal; the pose bends the body, not the root).
@@ -170,7 +170,7 @@ pub struct HumanConfig {
     /// The activity template ([`irmirror_body::prior::generator::TEMPLATES`]) the body parts
     /// no ray sees are reported in ([`unseen`]; default "stand"); empty: as the refinement
     /// left them. On 24 held-out bowls 2-D keypoints −0.056 ± 0.025 (22 better, 1 worse),
-    /// per-vertex −0.010 ± 0.008 m; mugs, cars and the hard view level (README,
+    /// per-vertex −0.010 ± 0.008 m; mugs, cars and the hard view level (EXPERIMENTS.md,
     /// "Thirty-first run").
     pub unseen_pose: String,
     /// How far the data term (all rays) may rise when a part takes `unseen_pose`'s

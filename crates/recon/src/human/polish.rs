@@ -5,13 +5,13 @@
 //!
 //! Why a yaw polish: the search places the body in eight yaw bins and the refinement settles
 //! a facing to within tens of degrees; with the thermal judge's front/back choice, held-out
-//! bowls still ended 30–50° off on about one in five (README, "Twenty-fourth run"), which the
-//! refinement alone does not leave (its basin is narrower than that).
+//! bowls still ended 30–50° off on about one in five (EXPERIMENTS.md, "Twenty-fourth run"), which
+//! the refinement alone does not leave (its basin is narrower than that).
 //!
 //! Why a place polish: the search's distances are log-spaced 22 % apart and a mirror image
 //! barely changes as the person slides along its rays (a taller person farther away looks the
 //! same), so the refinement keeps the distance it starts at; on cars, placed at the true root
-//! the search's "stand" pose ended at a lower data term than the fits (README, "Fourteenth
+//! the search's "stand" pose ended at a lower data term than the fits (EXPERIMENTS.md, "Fourteenth
 //! run"), whose roots lie along the objects→person line.
 
 use super::limbs::Polished;

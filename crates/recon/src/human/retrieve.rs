@@ -3,9 +3,9 @@
 //! Ranking the pose bank by the data term (one forward pass at the survivor's root) does not
 //! find the training pose nearest the person's: held-out bowls at the exact true root and
 //! facing, a start in that pose ends at 0.14 m per vertex, the data term's best of every
-//! source pose at 0.20 m (README, "Twenty-second run"). The data term is sharp: a pose whose
-//! outline is right but sits a few centimetres off scores like a wrong one. Retrieval compares
-//! outlines with a tolerance instead. Each object's reflected rays are cut with the plane
+//! source pose at 0.20 m (EXPERIMENTS.md, "Twenty-second run"). The data term is sharp: a pose
+//! whose outline is right but sits a few centimetres off scores like a wrong one. Retrieval
+//! compares outlines with a tolerance instead. Each object's reflected rays are cut with the plane
 //! through the state's root facing that object — the person as the object sees them, a
 //! virtual view, whatever the mirror's curvature — and each candidate body is projected from
 //! the object's centre onto the same plane and rasterised. A candidate is scored by a
@@ -13,9 +13,9 @@
 //! ray's distance to the silhouette's outside, per mask ray, at the best of a few small
 //! shifts in the plane.
 //!
-//! Measured (8 held-out bowls at the exact true root and facing, README "Twenty-third run"):
-//! the first pick ends the refinement at 0.27 m per vertex, the mean of the best 30 at 0.19 m
-//! ("stand" 0.30, the nearest source pose 0.16). It finds a better pose at a known facing,
+//! Measured (8 held-out bowls at the exact true root and facing, EXPERIMENTS.md "Twenty-third
+//! run"): the first pick ends the refinement at 0.27 m per vertex, the mean of the best 30 at 0.19
+//! m ("stand" 0.30, the nearest source pose 0.16). It finds a better pose at a known facing,
 //! not the facing: at the search's survivors it is off.
 
 use super::bank::PoseMode;
@@ -48,9 +48,9 @@ pub struct RetrievalConfig {
     /// ([`HumanProblem::retrieval_swap`]; its front/back partner is that state turned) before
     /// the refinement. Off: on 24 held-out bowls with `mean_of = 30` root median 0.148 →
     /// 0.092 m but per-vertex +0.049 ± 0.055 m (paired), successes 10 → 9; retrieving the
-    /// partners' poses too, +0.071 ± 0.059 m, successes 7 (README, "Twenty-third run").
+    /// partners' poses too, +0.071 ± 0.059 m, successes 7 (EXPERIMENTS.md, "Twenty-third run").
     /// Retried since: held-out bowls per-vertex +0.049 ± 0.046 m, successes 10 → 8; tuning
-    /// bowls root median 0.101 → 0.121 m (README, "Thirty-seventh run").
+    /// bowls root median 0.101 → 0.121 m (EXPERIMENTS.md, "Thirty-seventh run").
     pub survivors: bool,
     /// The most rays outside the mask scored per object (evenly strided).
     pub max_empty_rays: usize,
@@ -63,11 +63,11 @@ pub struct RetrievalConfig {
     /// refined hypotheses ranked with the best by loss the judge does not turn first. Off: on 24
     /// held-out bowls the fits turned ≥ 120° fall 5 → 3 and the root median 0.148 → 0.097 m,
     /// but facing within 30° stays 13, per-vertex −0.011 ± 0.033 m (paired), and stage 2
-    /// takes several times as long (README, "Twenty-fourth run"); on 12 held-out cars, where
-    /// the judge picks the true facing at the truth on 8 and on the fits' hypotheses on 14 of
-    /// 25, facing within 30° 9 → 4 (README, "Twenty-fifth run"). Retried at the judge's cost
-    /// since: tuning bowls' successes 9 → 13, held-out bowls' 10 → 10 (facing within 30° 11 →
-    /// 13), the tuning hard view's 4 → 0, stage 2 1.25–2× as long (README, "Thirty-sixth
+    /// takes several times as long (EXPERIMENTS.md, "Twenty-fourth run"); on 12 held-out cars,
+    /// where the judge picks the true facing at the truth on 8 and on the fits' hypotheses on 14 of
+    /// 25, facing within 30° 9 → 4 (EXPERIMENTS.md, "Twenty-fifth run"). Retried at the judge's
+    /// cost since: tuning bowls' successes 9 → 13, held-out bowls' 10 → 10 (facing within 30° 11 →
+    /// 13), the tuning hard view's 4 → 0, stage 2 1.25–2× as long (EXPERIMENTS.md, "Thirty-sixth
     /// run"). Off, the judge still acts where the reflection shows no head
     /// (`facing_head_share`).
     pub facing: bool,
@@ -75,21 +75,21 @@ pub struct RetrievalConfig {
     /// 30: held-out mugs facing within 30° 8 → 11, per-vertex −0.044 ± 0.072 m (paired),
     /// successes 4 → 3; tuning mugs 11 → 12; held-out bowls 1 of 24 changed (better), cars
     /// and the hard view identical; the slowest of BENCHMARKS' six frames 12.4 → 10.9 s
-    /// (README, "Thirty-fourth run").
+    /// (EXPERIMENTS.md, "Thirty-fourth run").
     pub facing_top: usize,
     /// The judge draws its poses from this many source poses, spread by farthest-point
     /// sampling in joint-rotation space (0: the whole bank, 729). Fewer are cheaper and lose
-    /// held-out mugs' successes: 365 or 486, 4 → 1 of 24 (README, "Thirty-fourth run").
+    /// held-out mugs' successes: 365 or 486, 4 → 1 of 24 (EXPERIMENTS.md, "Thirty-fourth run").
     pub facing_bank: usize,
     /// With `facing` on, the judge turns the search's survivors too (off: it ranks the
     /// refined hypotheses only — the survivors' front/back flips are refined either way; on
     /// 24 held-out bowls facing within 30° 14 (13 with the survivors turned), but root median
     /// 0.151 m (0.097) and per-vertex −0.004 ± 0.029 m against no judge: the survivors' turn
-    /// is where its gain comes from; README, "Twenty-fifth run").
+    /// is where its gain comes from; EXPERIMENTS.md, "Twenty-fifth run").
     pub facing_survivors: bool,
     /// The judge abstains (keeps a state) where its silhouette twin faces less than this many
     /// degrees away from it (0: it always judges). At 120 on 12 held-out cars facing within
-    /// 30° 4 → 7 of 12 (none: 9), and on 24 bowls the judge's gain gone (README,
+    /// 30° 4 → 7 of 12 (none: 9), and on 24 bowls the judge's gain gone (EXPERIMENTS.md,
     /// "Twenty-fifth run").
     pub facing_min_turn_deg: f64,
     /// With `facing` off, the judge still acts where the reflection shows no head: where the
@@ -100,7 +100,7 @@ pub struct RetrievalConfig {
     /// less the data term tells the true body from its outline twin on 5 of 20 (where they
     /// make more: 41 of 45 bowls, 20 of 24 hard-view captures) — there the judge's
     /// outline-tolerant comparison is the only front/back cue left. Where it acts, a frame took
-    /// 1.6–2× as long (README, "Thirty-third run"; cheaper since, "Thirty-fourth run").
+    /// 1.6–2× as long (EXPERIMENTS.md, "Thirty-third run"; cheaper since, "Thirty-fourth run").
     pub facing_head_share: f64,
 }
 

@@ -78,12 +78,12 @@ pub struct SearchConfig {
     /// are made in, each a state's own through the rounds and the refinement; empty (default):
     /// `[human] build` alone. Four (gender 0.2 / 0.8 × weight 0.3 / 0.7) on the 8 tuning cars:
     /// root +0.070 ± 0.150 m, 4 better / 4 worse — the grid's survivors spread over the builds
-    /// (README, "Thirtieth run").
+    /// (EXPERIMENTS.md, "Thirtieth run").
     pub builds: Vec<irmirror_body::Phenotype>,
     /// Candidates kept after scoring the grid as it stands (no steps). 64 (4× the halving's
     /// steps) turned the 8 tuning cars' facing right 5 → 8, but on 24 held-out cars root
     /// +0.065 ± 0.099 m and successes 12 → 6: a wider search finds more wrong states the loss
-    /// prefers to the truth (README, "Thirtieth run").
+    /// prefers to the truth (EXPERIMENTS.md, "Thirtieth run").
     pub keep_scored: usize,
     /// Halving rounds.
     pub rounds: usize,
@@ -99,7 +99,7 @@ pub struct SearchConfig {
     /// Cut to distinct states (root > 25 cm or facing > 45° apart) at the screening and each
     /// halving, not to the best alone. Off: it found lower losses (held-out fits' data term
     /// lower in every cell) but not nearer people, and the bowls' 2-D keypoints got worse on
-    /// both sets (README, "Tenth run").
+    /// both sets (EXPERIMENTS.md, "Tenth run").
     pub distinct_cuts: bool,
     /// Refine each survivor's front/back flip too.
     pub flips: bool,
@@ -107,7 +107,7 @@ pub struct SearchConfig {
     /// Off by default: at 32 on the held-out quick set successes went 5 → 7 of 32, but
     /// per-vertex errors moved both ways (10 captures better, 8 worse; the mugs 1 / 5), no
     /// interval excluded 0, on 24 more bowls and 24 cars it gained nothing (successes 10 → 9,
-    /// 9 → 7), and a frame took ≈ 10 % longer (README, "Fifteenth run").
+    /// 9 → 7), and a frame took ≈ 10 % longer (EXPERIMENTS.md, "Fifteenth run").
     pub pose_bank: usize,
     /// The bank's best poses per survivor that take the last round's steps.
     pub bank_keep: usize,
@@ -119,7 +119,7 @@ pub struct SearchConfig {
     /// `bank_keep << N`, then N halving rounds of `first_steps`, doubled each round. Off: on
     /// 8 held-out bowls with every source pose (`pose_bank = 1000, bank_rounds = 4`)
     /// per-vertex median 0.257 → 0.182 m (paired −0.038 ± 0.109), but stage 2 46.8 s
-    /// a capture alone (README, "Twenty-second run").
+    /// a capture alone (EXPERIMENTS.md, "Twenty-second run").
     pub bank_rounds: usize,
     /// Configurations per body part the limb search tries ([`super::limbs`]).
     pub limb_options: usize,
@@ -128,12 +128,12 @@ pub struct SearchConfig {
     pub limb_sweeps: usize,
     /// The survivors the limb search starts from, best first; 0 (default): none. Off: on 24
     /// held-out bowls it moved nothing (paired per-vertex +0.004 ± 0.029 m), on 12 cars facing
-    /// within 30° went 9 → 6 (README, "Seventeenth run").
+    /// within 30° went 9 → 6 (EXPERIMENTS.md, "Seventeenth run").
     pub limb_survivors: usize,
     /// The best refined hypotheses (by the full loss) the limb polish tries to better
     /// ([`HumanProblem::limb_polish`]: a limb search at the refined root and facing, then the
     /// refinement again, kept when lower); 0 (default): none. Off: on 24 held-out bowls root
-    /// median 0.166 → 0.130 m but per-vertex −0.006 ± 0.023 m, and +10.5 s a frame (README,
+    /// median 0.166 → 0.130 m but per-vertex −0.006 ± 0.023 m, and +10.5 s a frame (EXPERIMENTS.md,
     /// "Seventeenth run").
     pub limb_polish: usize,
     /// The best refined hypotheses (by the full loss) the yaw polish tries to better
@@ -141,12 +141,12 @@ pub struct SearchConfig {
     /// each refined again, the lowest kept when below the hypothesis); 0: none. Default 2,
     /// where the refinement draws fresh batches (a car door's reflection; on a tabletop's
     /// fixed batch only with `yaw_polish_fixed_batch`): on 24 tuning cars root −0.087 ± 0.052
-    /// m (paired; 15 better / 3 worse), per-vertex −0.062 ± 0.039 m (README, "Thirty-seventh
-    /// run").
+    /// m (paired; 15 better / 3 worse), per-vertex −0.062 ± 0.039 m (EXPERIMENTS.md,
+    /// "Thirty-seventh run").
     pub yaw_polish: usize,
     /// The yaw polish on captures whose refinement steps on one fixed batch too (the
     /// tabletops). Off: there it lowers turned states' losses below the right ones — on 24
-    /// held-out bowls per-vertex +0.029 ± 0.050 m, facing within 30° 13 → 9 (README,
+    /// held-out bowls per-vertex +0.029 ± 0.050 m, facing within 30° 13 → 9 (EXPERIMENTS.md,
     /// "Twenty-fifth run").
     pub yaw_polish_fixed_batch: bool,
     /// The yaw polish's turn, degrees.
@@ -155,16 +155,16 @@ pub struct SearchConfig {
     /// ([`HumanProblem::place_polish`]: the root moved nearer and farther along the line from
     /// the mirror by `place_polish_frac` of its distance, each refined again, the lowest kept
     /// when below the hypothesis); 0 (default): none. At 2 on 24 held-out cars root +0.017 ±
-    /// 0.127 m (README, "Thirtieth run").
+    /// 0.127 m (EXPERIMENTS.md, "Thirtieth run").
     pub place_polish: usize,
     /// The place polish's move, a fraction of the person's distance from the mirror (0–1).
     pub place_polish_frac: f64,
     /// Each survivor's partner is its silhouette twin ([`HumanProblem::twin`]: pose mirrored,
     /// root turned so an orthographic view along the objects→person line is unchanged) rather
     /// than its root turned 180° (`flipped`). Off:
-    /// on 24 held-out mugs successes 0 → 4, on 24 bowls 10 → 7 (README, "Seventeenth run");
+    /// on 24 held-out mugs successes 0 → 4, on 24 bowls 10 → 7 (EXPERIMENTS.md, "Seventeenth run");
     /// retried since (successes): tuning bowls 9 → 11, held-out bowls 10 → 6, tuning mugs
-    /// 5 → 4, tuning hard view 4 → 0 (README, "Thirty-sixth run").
+    /// 5 → 4, tuning hard view 4 → 0 (EXPERIMENTS.md, "Thirty-sixth run").
     pub twin_flips: bool,
 }
 

@@ -1,7 +1,7 @@
 //! The body parts no ray sees, reported in a standing configuration.
 //!
 //! A mirror shows part of the person: a bowl the upper body, a mug a band of the torso, a car
-//! door the body from the knees or hips up (README, "Thirtieth run"). The refinement moves
+//! door the body from the knees or hips up (EXPERIMENTS.md, "Thirtieth run"). The refinement moves
 //! the parts no ray sees only through the pose prior's coupling (one latent for the whole
 //! body), so a fit whose upper body matches can report legs in a stride or crouch the person
 //! never took. After the refinement each state's body parts ([`super::limbs::body_parts`]:
