@@ -28,15 +28,15 @@
 //!   stratum's rays with probability ∝ `(1 − α) + α exp(−e/τ)` at the curriculum's final
 //!   `edge_mix` and `edge_tau_px[1]`, importance-weighted: the same loss, estimated with more of
 //!   the rays that decide the outline. Ablated: a uniform stratified batch. With
-//! `refine_rays` = 0 (the paper's refinement), each iteration draws `rays_per_iteration` rays
-//! without replacement with   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's
-//! edge; α grows from 0 to   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the
-//! iterations (curriculum).   Ablated: uniform draws of the same count. With the mask's data term
-//! the draws are made   among the **active set** only (`active_margin_m`): the mask's rays and
-//! those passing within   that margin of the body, refreshed every `active_every` steps, at most
-//! `max_ray_fraction`   of them. The other rays have occupancy ≈ 0 and target 0 and add nothing to
-//! the soft IoU,   yet were 98 % of a draw on a car door (a 2,500-pixel reflection among 150,000
-//! object   pixels: ≈ 50 mask rays per step).
+//!   `refine_rays` = 0 (the paper's refinement), each iteration draws `rays_per_iteration` rays without replacement with
+//!   weight `(1 − α) + α exp(−e/τ)`, `e` the pixel distance to the mask's edge; α grows from 0 to
+//!   `edge_mix` and τ shrinks from `edge_tau_px[0]` to `[1]` over the iterations (curriculum).
+//!   Ablated: uniform draws of the same count. With the mask's data term the draws are made
+//!   among the **active set** only (`active_margin_m`): the mask's rays and those passing within
+//!   that margin of the body, refreshed every `active_every` steps, at most `max_ray_fraction`
+//!   of them. The other rays have occupancy ≈ 0 and target 0 and add nothing to the soft IoU,
+//!   yet were 98 % of a draw on a car door (a 2,500-pixel reflection among 150,000 object
+//!   pixels: ≈ 50 mask rays per step).
 //! * **σ annealing.** The occupancy blur shrinks geometrically from `sigma_m2[0]` to `[1]`.
 //! * **Global search, then refinement** ([`search`]): candidates over the full circle of facing
 //!   directions × distances along the mask's reflected rays × pose-prior modes, scored cheaply
