@@ -50,7 +50,9 @@ pub struct RetrievalConfig {
     /// 0.092 m but per-vertex +0.049 ± 0.055 m (paired), successes 10 → 9; retrieving the
     /// partners' poses too, +0.071 ± 0.059 m, successes 7 (EXPERIMENTS.md, "Twenty-third run").
     /// Retried since: held-out bowls per-vertex +0.049 ± 0.046 m, successes 10 → 8; tuning
-    /// bowls root median 0.101 → 0.121 m (EXPERIMENTS.md, "Thirty-seventh run").
+    /// bowls root median 0.101 → 0.121 m (EXPERIMENTS.md, "Thirty-seventh run"); after the
+    /// judge turned the survivors (`facing = true`): tuning bowls root +0.030 ± 0.032 m,
+    /// held-out successes 10 → 8 (EXPERIMENTS.md, "Thirty-eighth run").
     pub survivors: bool,
     /// The most rays outside the mask scored per object (evenly strided).
     pub max_empty_rays: usize,
