@@ -97,6 +97,13 @@ pub struct Diagnosis {
     /// Root error after that refinement, m.
     #[serde(default)]
     pub truth_start_root_error_m: Option<f64>,
+    /// Mean per-vertex error after that refinement, m: what a search that found the truth's
+    /// basin would report — the ceiling of any search for this loss and body model.
+    #[serde(default)]
+    pub truth_start_vertex_error_m: Option<f64>,
+    /// Facing error after that refinement, degrees (`None`: keypoints degenerate).
+    #[serde(default)]
+    pub truth_start_facing_error_deg: Option<f64>,
     /// Our model *at* the truth, before any step (the true height slider, the pose prior's
     /// encoding of the true pose — with the exact residual when the fit has one —, mean-adult
     /// proportions, the root placed by the rigid motion that best aligns it onto the true
@@ -295,9 +302,18 @@ pub(super) fn diagnose(
         .iter()
         .map(|st| centred.thermal_facing(st, &hcfg.retrieval, 30))
         .collect::<Result<Vec<_>, _>>()?;
-    let (truth_start_loss, truth_start_root_error_m) =
-        refine_from_truth(&truth_state, true_root, priors, rec, (seed, cfg))?
-            .map_or((None, None), |(l, e)| (Some(l), Some(e)));
+    let from_truth = match refine_from_truth(&truth_state, priors, rec, (seed, cfg))? {
+        Some((end, data)) => Some((end.translation, data, posed_body(model, prior, &end)?)),
+        None => None,
+    };
+    let truth_start_loss = from_truth.as_ref().map(|(_, data, _)| *data);
+    let truth_start_root_error_m = from_truth.as_ref().map(|(r, _, _)| (r - true_root).norm());
+    let truth_start_vertex_error_m = from_truth
+        .as_ref()
+        .and_then(|(_, _, b)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
+    let truth_start_facing_error_deg = from_truth
+        .as_ref()
+        .and_then(|(_, _, b)| facing_error_deg(&b.keypoints, &p.sim.body.keypoints));
     let basin = match basin {
         Some(b) => probe_basin(
             (
@@ -336,6 +352,8 @@ pub(super) fn diagnose(
         right_facing_vertex_error_m,
         truth_start_loss,
         truth_start_root_error_m,
+        truth_start_vertex_error_m,
+        truth_start_facing_error_deg,
         model_truth_loss,
         model_truth_vertex_error_m,
         truth_flip_loss,
@@ -397,22 +415,21 @@ fn mirror_error(
     Some((median(&mut angle), median(&mut offset)))
 }
 
-/// Stage 2's refinement started at the truth (as our model can state it): its data term and
-/// root error; `None` when it diverged.
+/// Stage 2's refinement started at the truth (as our model can state it): the state it ends
+/// at and that state's data term; `None` when it diverged.
 fn refine_from_truth(
     truth: &HumanState,
-    true_root: Vector3<f64>,
     priors: BodyPriors<'_>,
     rec: &Reconstruction,
     (seed, cfg): (u64, &ReconConfig),
-) -> Result<Option<(f64, f64)>, EvalError> {
+) -> Result<Option<(HumanState, f64)>, EvalError> {
     let hcfg = cfg.human_settings();
     with_problem(priors, rec, &hcfg, |problem, edge| {
         let Some(end) = refine_as_fit(problem, truth, &hcfg, edge, seed)? else {
             return Ok(None);
         };
         let data = problem.full_eval(&end, &hcfg)?.data;
-        Ok(Some((data, (end.translation - true_root).norm())))
+        Ok(Some((end, data)))
     })
 }
 

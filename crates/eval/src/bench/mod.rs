@@ -333,6 +333,8 @@ mod tests {
             right_facing_vertex_error_m: None,
             truth_start_loss: Some(0.25),
             truth_start_root_error_m: Some(0.05),
+            truth_start_vertex_error_m: Some(0.12),
+            truth_start_facing_error_deg: Some(10.0),
             model_truth_loss: Some(0.5),
             model_truth_vertex_error_m: Some(0.15),
             truth_flip_loss: Some(0.35),
@@ -478,6 +480,11 @@ mod tests {
         );
         // Hypotheses: both diagnosed fits face 170° off, so no right-facing hypothesis.
         assert!(t.contains("| 0 of 2 | – (n = 0) |"), "{t}");
+        // Our model at the truth, then refined from it: 0.05 m root, 0.12 m per vertex, 10°.
+        assert!(
+            t.contains("| 0.150 / 0.500 | 0.050 / 0.120; 2 of 2 |\n"),
+            "{t}"
+        );
         assert!(!t.contains("| car |"), "rows without captures are left out");
         assert!(html(&r, &t).contains("captures/tabletop-mug_02/overlay.png"));
     }

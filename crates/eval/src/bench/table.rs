@@ -287,10 +287,12 @@ pub fn diagnosis_table(r: &Report) -> String {
 
 /// The full model's medians and its hypotheses per cell (issue 25's figures): root error, root
 /// error over the person's distance, the true facing (± 30°) among the reported hypotheses, and
-/// the mean per-vertex error of the best hypothesis facing the right way and of the best by loss.
+/// the mean per-vertex error of the best hypothesis facing the right way and of the best by loss;
+/// our model at the truth, and refined from it (a search's ceiling: root and per-vertex error,
+/// how often it still faces within 30°).
 pub fn hypotheses_table(r: &Report) -> String {
     let mut s = String::from(
-        "\n| cell | n | root error, median (m) | root error / distance, median (%) | true facing among the hypotheses | per-vertex error, best right-facing hypothesis, median (m) | per-vertex error, best by loss, median (m) | 2-D keypoints, median | stage 2 time, median (s) | our model at the truth: per-vertex error / data term, median (m / –) |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "\n| cell | n | root error, median (m) | root error / distance, median (%) | true facing among the hypotheses | per-vertex error, best right-facing hypothesis, median (m) | per-vertex error, best by loss, median (m) | 2-D keypoints, median | stage 2 time, median (s) | our model at the truth: per-vertex error / data term, median (m / –) | our model refined from the truth (a search's ceiling): root / per-vertex error, median (m); facing within 30° |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in Cell::ALL {
         let caps = of_cell(r, c);
@@ -326,8 +328,24 @@ pub fn hypotheses_table(r: &Report) -> String {
             .filter_map(|d| d.model_truth_vertex_error_m)
             .collect();
         let floor_loss: Vec<f64> = ds.iter().filter_map(|d| d.model_truth_loss).collect();
+        let ceil_root: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.truth_start_root_error_m)
+            .collect();
+        let ceil_vertex: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.truth_start_vertex_error_m)
+            .collect();
+        let ceil_facing: Vec<f64> = ds
+            .iter()
+            .filter_map(|d| d.truth_start_facing_error_deg)
+            .collect();
+        let ceil_right = ceil_facing
+            .iter()
+            .filter(|&&f| f <= super::SUCCESS_FACING_DEG)
+            .count();
         s.push_str(&format!(
-            "| {c} | {} | {} | {} | {found} of {} | {} (n = {}) | {} | {} | {} | {} / {} |\n",
+            "| {c} | {} | {} | {} | {found} of {} | {} (n = {}) | {} | {} | {} | {} / {} | {} / {}; {ceil_right} of {} |\n",
             caps.len(),
             median(&pick(|e| Some(e.root_error_m))),
             median(&pick(|e| Some(
@@ -341,6 +359,9 @@ pub fn hypotheses_table(r: &Report) -> String {
             median(&times),
             median(&floor),
             median(&floor_loss),
+            median(&ceil_root),
+            median(&ceil_vertex),
+            ceil_facing.len(),
         ));
     }
     s
