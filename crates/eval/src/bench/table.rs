@@ -328,18 +328,12 @@ pub fn hypotheses_table(r: &Report) -> String {
             .filter_map(|d| d.model_truth_vertex_error_m)
             .collect();
         let floor_loss: Vec<f64> = ds.iter().filter_map(|d| d.model_truth_loss).collect();
-        let ceil_root: Vec<f64> = ds
-            .iter()
-            .filter_map(|d| d.truth_start_root_error_m)
-            .collect();
-        let ceil_vertex: Vec<f64> = ds
-            .iter()
-            .filter_map(|d| d.truth_start_vertex_error_m)
-            .collect();
-        let ceil_facing: Vec<f64> = ds
-            .iter()
-            .filter_map(|d| d.truth_start_facing_error_deg)
-            .collect();
+        let of = |f: fn(&Diagnosis) -> Option<f64>| -> Vec<f64> {
+            ds.iter().filter_map(|d| f(d)).collect()
+        };
+        let ceil_root = of(|d| d.truth_start_root_error_m);
+        let ceil_vertex = of(|d| d.truth_start_vertex_error_m);
+        let ceil_facing = of(|d| d.truth_start_facing_error_deg);
         let ceil_right = ceil_facing
             .iter()
             .filter(|&&f| f <= super::SUCCESS_FACING_DEG)
