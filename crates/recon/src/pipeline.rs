@@ -459,7 +459,8 @@ pub fn reconstruct_human(
     let hcfg = cfg.human_settings();
     let (rad, data_term) = radiometry(&pre, &rays, priors.model, &hcfg)?;
     let problem = human_problem(priors, &rays, &pre.mask, &objects, &hcfg, rad.as_ref());
-    progress.stage("human fit", hcfg.inits as u64);
+    let passes = 1 + usize::from(problem.rise_pass(&hcfg).is_some());
+    progress.stage("human fit", (passes * hcfg.inits) as u64);
     let (mut human, states) = fit_human(&problem, &hcfg, seed, &|_| progress.tick())?;
     human.data_term = data_term;
     Ok(Reconstruction {

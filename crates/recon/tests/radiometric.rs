@@ -313,6 +313,62 @@ fn the_thermal_polish_takes_the_best_and_its_partner() {
     assert!(some.iter().any(|&n| n < long), "{some:?}");
 }
 
+/// The rise pass (forced on by its threshold): twice the candidates, and the reported
+/// hypothesis first faces the mask search winner's way (within 90°) when any does (that
+/// search alone with the threshold at 0: the same seed gives the same first pass).
+#[test]
+fn the_rise_pass_reports_the_facing_the_mask_search_chose() {
+    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
+    use irmirror_geom::rotation::axis_angle_to_matrix;
+    use irmirror_recon::human::radiometric::Radiometry;
+    use irmirror_recon::human::search::{facing_angle_deg, fit_human};
+    use irmirror_recon::human::{HumanConfig, Hypothesis};
+    let (sc, sim, _) = car_capture(1);
+    let rays = true_object_footprint_rays(&sc, &sim);
+    let (with, without) = &sim.radiance;
+    let rise = irmirror_capture::Image {
+        data: with
+            .data
+            .iter()
+            .zip(&without.data)
+            .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
+            .collect(),
+        ..with.clone()
+    };
+    let pre = preprocessed(&sim, rise, Some(sc.ambient_c + ZERO_C_K), sc.sensor.blur_px);
+    let rad = Radiometry::new(&pre, &rays, model()).unwrap();
+    let problem = thermal_problem(&sim, &rays, &rad);
+    let mut cfg = HumanConfig {
+        iterations: 30,
+        top_k: 6,
+        ..HumanConfig::default()
+    };
+    cfg.radiometric.polish_iterations = 10;
+    cfg.search.yaw_bins = 4;
+    cfg.search.distances = 3;
+    cfg.search.pose_modes = vec!["stand".into()];
+    cfg.radiometric.rise_pass_max_mask_px = 0;
+    assert!(problem.rise_pass(&cfg).is_none());
+    let (mask, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
+    cfg.radiometric.rise_pass_max_mask_px = usize::MAX;
+    assert!(problem.rise_pass(&cfg).is_some());
+    let (both, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
+    assert_eq!(both.candidates, 2 * mask.candidates);
+    let rot = |h: &Hypothesis| axis_angle_to_matrix(&h.root_rotvec_rad.into());
+    let lead = rot(&mask.hypotheses[0]);
+    let off: Vec<f64> = both
+        .hypotheses
+        .iter()
+        .map(|h| facing_angle_deg(&problem.up, &rot(h), &lead))
+        .collect();
+    assert!(off.len() >= 2, "{off:?}");
+    assert!(
+        off.iter().any(|&a| a >= 90.0),
+        "both sides reported: {off:?}"
+    );
+    assert!(off[0] < 90.0, "{off:?}");
+}
+
 /// Stage 2's problem on `rays` (up +Z, no floor) with the radiometric term `rad`.
 fn thermal_problem<'a>(
     sim: &'a irmirror_sim::Simulation,

@@ -203,14 +203,7 @@ pub(super) fn diagnose(
         radiometry: rad.as_ref(),
         build: hcfg.build,
     };
-    let truth: Vec<Vector3<f64>> = p
-        .sim
-        .body
-        .mesh
-        .vertices
-        .iter()
-        .map(|v| Vector3::from(v.map(f64::from)))
-        .collect();
+    let truth = truth_vertices(p);
     let (truth_loss, _) = problem.mesh_data_loss(&truth, &hcfg);
     // The truth turned around (180° about its up axis through the root).
     let root = p.sim.body.joints[0];
@@ -302,18 +295,11 @@ pub(super) fn diagnose(
         .iter()
         .map(|st| centred.thermal_facing(st, &hcfg.retrieval, 30))
         .collect::<Result<Vec<_>, _>>()?;
-    let from_truth = match refine_from_truth(&truth_state, priors, rec, (seed, cfg))? {
-        Some((end, data)) => Some((end.translation, data, posed_body(model, prior, &end)?)),
-        None => None,
-    };
-    let truth_start_loss = from_truth.as_ref().map(|(_, data, _)| *data);
-    let truth_start_root_error_m = from_truth.as_ref().map(|(r, _, _)| (r - true_root).norm());
-    let truth_start_vertex_error_m = from_truth
-        .as_ref()
-        .and_then(|(_, _, b)| vertex_error(&b.vertices, &p.sim.body.mesh.vertices));
-    let truth_start_facing_error_deg = from_truth
-        .as_ref()
-        .and_then(|(_, _, b)| facing_error_deg(&b.keypoints, &p.sim.body.keypoints));
+    let from_truth = ceiling_from(&truth_state, p, priors, rec, (seed, cfg))?;
+    let truth_start_loss = from_truth.as_ref().map(|c| c.loss);
+    let truth_start_root_error_m = from_truth.as_ref().map(|c| c.root_error_m);
+    let truth_start_vertex_error_m = from_truth.as_ref().and_then(|c| c.vertex_error_m);
+    let truth_start_facing_error_deg = from_truth.as_ref().and_then(|c| c.facing_error_deg);
     let basin = match basin {
         Some(b) => probe_basin(
             (
@@ -415,6 +401,61 @@ fn mirror_error(
     Some((median(&mut angle), median(&mut offset)))
 }
 
+/// Our model refined from the truth as the fit refines a survivor (a search's ceiling): the
+/// end state's data term and errors.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ceiling {
+    /// The end state's data term.
+    pub loss: f64,
+    /// Its root error, m.
+    pub root_error_m: f64,
+    /// Its mean per-vertex error, m.
+    pub vertex_error_m: Option<f64>,
+    /// Its facing error, degrees.
+    pub facing_error_deg: Option<f64>,
+}
+
+/// The ceiling ([`Ceiling`]) of stage 2 as `cfg` and `rec` pose it (an oracle variant's own
+/// settings and objects): from the truth as our model states it with `cfg`'s build; `None`
+/// when the refinement diverged.
+pub(super) fn ceiling(
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+    (seed, cfg): (u64, &ReconConfig),
+) -> Result<Option<Ceiling>, EvalError> {
+    let hcfg = cfg.human_settings();
+    let truth = truth_vertices(p);
+    let start = model_truth(p, priors, &truth, (&hcfg.build, hcfg.lr_residual > 0.0))?;
+    ceiling_from(&start, p, priors, rec, (seed, cfg))
+}
+
+/// The true body's vertices, depth frame.
+fn truth_vertices(p: &Prepared) -> Vec<Vector3<f64>> {
+    let v = &p.sim.body.mesh.vertices;
+    v.iter().map(|v| Vector3::from(v.map(f64::from))).collect()
+}
+
+/// [`ceiling`] from `start`.
+fn ceiling_from(
+    start: &HumanState,
+    p: &Prepared,
+    priors: BodyPriors<'_>,
+    rec: &Reconstruction,
+    (seed, cfg): (u64, &ReconConfig),
+) -> Result<Option<Ceiling>, EvalError> {
+    let Some((end, loss)) = refine_from_truth(start, priors, rec, (seed, cfg))? else {
+        return Ok(None);
+    };
+    let body = posed_body(priors.model, priors.prior, &end)?;
+    Ok(Some(Ceiling {
+        loss,
+        root_error_m: (end.translation - p.sim.body.joints[0]).norm(),
+        vertex_error_m: vertex_error(&body.vertices, &p.sim.body.mesh.vertices),
+        facing_error_deg: facing_error_deg(&body.keypoints, &p.sim.body.keypoints),
+    }))
+}
+
 /// Stage 2's refinement started at the truth (as our model can state it): the state it ends
 /// at and that state's data term; `None` when it diverged.
 fn refine_from_truth(
@@ -433,9 +474,10 @@ fn refine_from_truth(
     })
 }
 
-/// Stage 2's refinement of one start as `fit_human` runs it on each survivor of the search:
-/// the mask's schedule when a thermal polish follows (the rise throughout otherwise), then
-/// the polish on the rise when the capture has one. `None`: it diverged.
+/// Stage 2's refinement of one start as `fit_human` runs it on each survivor of the search
+/// whose states it reports: the mask's schedule when a thermal polish follows (the rise
+/// throughout otherwise, and in the rise pass of a small reflection), then the polish on the
+/// rise when the capture has one. `None`: it diverged.
 pub(super) fn refine_as_fit(
     problem: &HumanProblem<'_>,
     start: &HumanState,
@@ -444,6 +486,7 @@ pub(super) fn refine_as_fit(
     seed: u64,
 ) -> Result<Option<HumanState>, EvalError> {
     let hcfg = &problem.prior_weighted(hcfg);
+    let hcfg = &problem.rise_pass(hcfg).unwrap_or_else(|| hcfg.clone());
     let thermal = problem.radiometric(hcfg).is_some();
     let polish = thermal && hcfg.radiometric.polish_iterations > 0;
     let sample = problem.refine_sample(hcfg, seed);

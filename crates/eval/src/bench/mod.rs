@@ -16,7 +16,7 @@ pub use basin::{
     BANK, BasinProbe, BasinStart, LIMBS, NEAREST_BANK, RETRIEVED, RETRIEVED_TWIN, TRUTH_LATENT,
     TRUTH_TWIN, noisy_truth_scale,
 };
-pub use diagnosis::{Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M};
+pub use diagnosis::{Ceiling, Diagnosis, FailureClass, SUCCESS_FACING_DEG, SUCCESS_ROOT_M};
 pub use run::run;
 pub use table::{basin_table, diagnosis_table, hypotheses_table, markdown_table};
 
@@ -186,6 +186,10 @@ pub struct VariantResult {
     pub error: Option<String>,
     /// Stage-2 seconds (rays + fit).
     pub time_s: f64,
+    /// An oracle variant's own ceiling: our model refined from the truth with its settings and
+    /// objects (the full model's is in the capture's diagnosis).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ceiling: Option<Ceiling>,
 }
 
 /// One capture.
@@ -399,6 +403,12 @@ mod tests {
                                 eval: (!failed).then(|| eval(k as f64)),
                                 error: failed.then(|| "x".to_string()),
                                 time_s: 1.0,
+                                ceiling: v.on_request_only().then_some(Ceiling {
+                                    loss: 0.2,
+                                    root_error_m: 0.04,
+                                    vertex_error_m: Some(0.09),
+                                    facing_error_deg: Some(5.0),
+                                }),
                             },
                         )
                     })
@@ -458,6 +468,11 @@ mod tests {
             .unwrap_or("");
         assert!(
             oracle.contains("| tabletop-mug | 2 | 2 of 2 | 2 of 2 | 1 / 1 |"),
+            "{t}"
+        );
+        // Its ceiling (0.04 m root, 0.09 m per vertex) beside the full model's (the diagnosis').
+        assert!(
+            oracle.contains(" | 0.040 / 0.090; 0.050 / 0.120 |\n"),
             "{t}"
         );
         // Each ablation against the full model on the two captures where both ran: equal

@@ -2,7 +2,7 @@
 //! Random baseline and the diagnosis, then the report files.
 
 use super::basin::BasinProbe;
-use super::diagnosis::diagnose;
+use super::diagnosis::{ceiling, diagnose};
 use super::table::{html, markdown_table};
 use super::{
     BenchProgress, CaptureResult, Planned, RANDOM_DRAWS, Report, Selection, Set, Variant,
@@ -224,6 +224,7 @@ fn run_capture(
                 eval: None,
                 error: Some(format!("stage 1: {e}")),
                 time_s: 0.0,
+                ceiling: None,
             };
             result.variants = variants.iter().map(|&v| (v, failed.clone())).collect();
             progress.runs_done(variants.len() as u64);
@@ -268,6 +269,7 @@ fn run_capture(
                     eval: None,
                     error: Some(reason),
                     time_s: t0.elapsed().as_secs_f64(),
+                    ceiling: None,
                 };
                 result.variants.insert(variant, failed);
                 progress.runs_done(1);
@@ -295,10 +297,17 @@ fn run_capture(
                 &thumbs.join("third.png"),
             )?;
         }
+        // An oracle's ceiling: what its settings and objects let the loss keep of the truth.
+        let own_ceiling = if variant.on_request_only() {
+            ceiling(p, priors, &rec, (seed, &cfg))?
+        } else {
+            None
+        };
         let done = VariantResult {
             eval,
             error: None,
             time_s,
+            ceiling: own_ceiling,
         };
         result.variants.insert(variant, done);
         progress.runs_done(1);

@@ -96,6 +96,75 @@ pub(super) fn polish_refined(
     Ok(())
 }
 
+/// The thermal polish: `polish_iterations` steps on the rise for the best `polish_best` refined
+/// hypotheses by the rise (all when 0) and the best one's front/back partner, in parallel;
+/// their loss curves extended. A polish that diverges drops its hypothesis.
+pub(super) fn polish_rise(
+    problem: &HumanProblem<'_>,
+    cfg: &HumanConfig,
+    seed: u64,
+    refined: &mut [Option<Refined>],
+) -> Result<(), ReconError> {
+    let rc = &cfg.radiometric;
+    let live: Vec<usize> = (0..refined.len())
+        .filter(|&i| refined[i].is_some())
+        .collect();
+    let chosen: Vec<usize> = if rc.polish_best == 0 {
+        live
+    } else {
+        // Rank on the rise; the evaluations stay with the hypotheses not polished.
+        let evals: Vec<FullEval> = live
+            .par_iter()
+            .map(|&i| refined[i].as_ref().expect("live").evaluated(problem, cfg))
+            .collect::<Result<_, ReconError>>()?;
+        let mut order: Vec<(usize, f64)> =
+            live.iter().zip(&evals).map(|(&i, e)| (i, e.data)).collect();
+        for (&i, e) in live.iter().zip(evals) {
+            if let Some(r) = refined[i].as_mut() {
+                r.eval = Some(e);
+            }
+        }
+        order.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let n = rc.polish_best.min(order.len());
+        let mut chosen: Vec<usize> = order[..n].iter().map(|o| o.0).collect();
+        if let Some(&(best, _)) = order.first() {
+            let rot = |i: usize| &refined[i].as_ref().expect("live").state.rotation;
+            let partner = order[n..]
+                .iter()
+                .map(|o| o.0)
+                .find(|&i| super::search::front_back(&problem.up, rot(best), rot(i)));
+            chosen.extend(partner);
+        }
+        chosen
+    };
+    let sample = problem.polish_sample(cfg, seed);
+    let polished: Vec<_> = chosen
+        .par_iter()
+        .map(|&i| {
+            let r = refined[i].as_ref().expect("chosen among the refined");
+            let end = problem.polish(
+                &r.state,
+                cfg,
+                sample.as_ref(),
+                super::search::run_seed(seed, r.init),
+            )?;
+            Ok((i, end))
+        })
+        .collect::<Result<_, ReconError>>()?;
+    for (i, end) in polished {
+        refined[i] = match (refined[i].take(), end) {
+            (Some(mut r), Some((state, c))) => {
+                r.curve.extend(c);
+                r.state = state;
+                r.eval = None;
+                Some(r)
+            }
+            _ => None,
+        };
+    }
+    Ok(())
+}
+
 impl HumanProblem<'_> {
     /// `st` with its root turned by `deg` degrees about the up axis (through the root).
     pub fn yawed(&self, st: &HumanState, deg: f64) -> HumanState {

@@ -84,6 +84,14 @@ pub struct RadiometricConfig {
     /// hard view root −0.056 ± 0.046 m but facing within 30° 13 → 6 (EXPERIMENTS.md,
     /// "Thirty-ninth run").
     pub polish_iterations: usize,
+    /// On a reflection of at most this many pixels (with rays), the rise pass
+    /// ([`super::HumanProblem::rise_pass`]): a second search fits the rise throughout, the
+    /// mask's gives the side. 0 (default): never. 50 on the held-out hard view (Lepton-like,
+    /// 12–47 pixels): root median 0.199 → 0.162 m (paired −0.044 ± 0.039 m), facing within 30°
+    /// 13 → 12 of 24; but on the paper-like tabletops' ten captures that small (14–57 pixels,
+    /// most already lost) a bowl went 0.20 → 1.77 m and a mug 0.11 → 0.68 m off (EXPERIMENTS.md,
+    /// "Fortieth run"): for a low-resolution camera, not by default.
+    pub rise_pass_max_mask_px: usize,
     /// Refined hypotheses that take the polish: the best this many by the rise before it, and
     /// the best one's front/back partner (the pair the rise is there to tell apart); the others
     /// are ranked on the rise as they stand. 0: every hypothesis.
@@ -125,6 +133,7 @@ impl Default for RadiometricConfig {
             reflectance_bound_sigmas: 2.0,
             huber_sigmas: 3.0,
             polish_iterations: 40,
+            rise_pass_max_mask_px: 0,
             polish_best: 1,
             polish_lr_scale: 0.25,
             polish_rays: 8000,

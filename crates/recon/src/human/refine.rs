@@ -235,6 +235,27 @@ impl HumanProblem<'_> {
         c
     }
 
+    /// The settings of the rise pass ([`super::fit_human`]): on a reflection of at most
+    /// `radiometric.rise_pass_max_mask_px` pixels with rays (and a thermal polish on), a second
+    /// search and refinement fit the rise throughout (`polish_iterations` 0) and give the
+    /// reported states; the mask's search, as it ranks after its polish, gives their facing.
+    /// `None`: one search. On 10–50 pixels the mask's soft IoU barely moves as the person
+    /// slides along the rays, while each pixel's rise (how much of it the reflection covers)
+    /// does: refined on the rise from the search on, the held-out hard view's roots came
+    /// 0.199 → 0.160 m (median), but their facing within 30° 13 → 6 of 24 — each turned state
+    /// fits the rise's pattern by its pose — while the mask's winners faced right on 13. With
+    /// the rise pass: root 0.199 → 0.162 m, facing 13 → 12 (EXPERIMENTS.md, "Fortieth run").
+    pub fn rise_pass(&self, cfg: &HumanConfig) -> Option<HumanConfig> {
+        let rc = &cfg.radiometric;
+        let small =
+            rc.rise_pass_max_mask_px > 0 && self.pixels_with_rays().0 <= rc.rise_pass_max_mask_px;
+        (rc.polish_iterations > 0 && small && self.radiometric(cfg).is_some()).then(|| {
+            let mut c = cfg.clone();
+            c.radiometric.polish_iterations = 0;
+            c
+        })
+    }
+
     /// The refinement of one hypothesis before any polish, on [`Self::search_config`]'s data
     /// term: on the fixed batch `sample` ([`Self::refine_sample`]) at
     /// [`HumanConfig::refinement`]'s rates, or on fresh edge draws (given the mask's edge
