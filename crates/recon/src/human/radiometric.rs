@@ -92,6 +92,10 @@ pub struct RadiometricConfig {
     /// most already lost) a bowl went 0.20 → 1.77 m and a mug 0.11 → 0.68 m off (EXPERIMENTS.md,
     /// "Fortieth run"): for a low-resolution camera, not by default.
     pub rise_pass_max_mask_px: usize,
+    /// The rise pass's states are reported only when its first lies within this distance of
+    /// the mask search's winner (m; 0: always): the mask's search finds the basin, the rise
+    /// places the person in it.
+    pub rise_pass_max_move_m: f64,
     /// Refined hypotheses that take the polish: the best this many by the rise before it, and
     /// the best one's front/back partner (the pair the rise is there to tell apart); the others
     /// are ranked on the rise as they stand. 0: every hypothesis.
@@ -134,6 +138,7 @@ impl Default for RadiometricConfig {
             huber_sigmas: 3.0,
             polish_iterations: 40,
             rise_pass_max_mask_px: 0,
+            rise_pass_max_move_m: 0.0,
             polish_best: 1,
             polish_lr_scale: 0.25,
             polish_rays: 8000,

@@ -610,7 +610,7 @@ pub fn fit_human(
         s.yaw_bins.max(1) * s.distances.max(1) * s.pose_modes.len() * s.builds.len().max(1);
     let (mut scored, mut diverged) = ranked(problem, cfg, seed, progress)?;
     if let Some(rise_cfg) = problem.rise_pass(cfg) {
-        let lead = scored[0].1.rotation;
+        let (lead, lead_root) = (scored[0].1.rotation, scored[0].1.translation);
         let (mut rise, d) = ranked(problem, &rise_cfg, seed, progress)?;
         // The first (best) on the winner's side: the mask's search chose front or back, not
         // the exact facing (the state facing nearest it, whatever its loss, left the tuning
@@ -619,12 +619,18 @@ pub fn fit_human(
         let angle = |k: usize| facing_angle_deg(&up, &rise[k].1.rotation, &lead);
         let side = (0..rise.len()).find(|&k| angle(k) < 90.0);
         let first = side.or_else(|| (0..rise.len()).min_by(|&i, &j| angle(i).total_cmp(&angle(j))));
-        if let Some(j) = first {
-            tracing::debug!("rise pass: its hypothesis {j} faces the mask search winner's way");
+        let moved = |j: usize| (rise[j].1.translation - lead_root).norm();
+        let max_move = cfg.radiometric.rise_pass_max_move_m;
+        if let Some(j) = first.filter(|&j| max_move <= 0.0 || moved(j) <= max_move) {
+            tracing::debug!(
+                "rise pass: its hypothesis {j} faces the mask search winner's way, {:.2} m from it",
+                moved(j)
+            );
             let h = rise.remove(j);
             rise.insert(0, h);
+            scored = rise;
         }
-        (scored, diverged, candidates) = (rise, diverged + d, 2 * candidates);
+        (diverged, candidates) = (diverged + d, 2 * candidates);
     }
     let top_k = cfg.top_k.max(1);
     let mut kept: Vec<(Hypothesis, HumanState)> = Vec::new();
