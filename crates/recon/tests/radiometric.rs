@@ -268,34 +268,10 @@ fn mask_stratified_batch_on_a_footprint_takes_one_ray_per_pixel() {
 /// curves hold the polish's steps.
 #[test]
 fn the_thermal_polish_takes_the_best_and_its_partner() {
-    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
-    use irmirror_recon::human::radiometric::Radiometry;
-    use irmirror_recon::human::{HumanConfig, search::fit_human};
-    let (sc, sim, _) = car_capture(1);
-    let rays = true_object_footprint_rays(&sc, &sim);
-    let (with, without) = &sim.radiance;
-    let rise = irmirror_capture::Image {
-        data: with
-            .data
-            .iter()
-            .zip(&without.data)
-            .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
-            .collect(),
-        ..with.clone()
-    };
-    let pre = preprocessed(&sim, rise, Some(sc.ambient_c + ZERO_C_K), sc.sensor.blur_px);
-    let rad = Radiometry::new(&pre, &rays, model()).unwrap();
+    use irmirror_recon::human::search::fit_human;
+    let (sim, rays, rad) = car_rise(1);
     let problem = thermal_problem(&sim, &rays, &rad);
-    let mut cfg = HumanConfig {
-        iterations: 30,
-        top_k: 6,
-        ..HumanConfig::default()
-    };
-    cfg.radiometric.polish_iterations = 10;
-    // A small search: 4 facings × 3 distances, standing.
-    cfg.search.yaw_bins = 4;
-    cfg.search.distances = 3;
-    cfg.search.pose_modes = vec!["stand".into()];
+    let mut cfg = small_search();
     let mut curves = |best: usize| -> Vec<usize> {
         cfg.radiometric.polish_best = best;
         let (fit, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
@@ -315,38 +291,16 @@ fn the_thermal_polish_takes_the_best_and_its_partner() {
 
 /// The rise pass (forced on by its threshold): twice the candidates, and the reported
 /// hypothesis first faces the mask search winner's way (within 90°) when any does (that
-/// search alone with the threshold at 0: the same seed gives the same first pass).
+/// search alone with the threshold at 0: the same seed gives the same first pass); with its
+/// guard at a micrometre, the mask pass's hypotheses.
 #[test]
 fn the_rise_pass_reports_the_facing_the_mask_search_chose() {
-    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
     use irmirror_geom::rotation::axis_angle_to_matrix;
-    use irmirror_recon::human::radiometric::Radiometry;
+    use irmirror_recon::human::Hypothesis;
     use irmirror_recon::human::search::{facing_angle_deg, fit_human};
-    use irmirror_recon::human::{HumanConfig, Hypothesis};
-    let (sc, sim, _) = car_capture(1);
-    let rays = true_object_footprint_rays(&sc, &sim);
-    let (with, without) = &sim.radiance;
-    let rise = irmirror_capture::Image {
-        data: with
-            .data
-            .iter()
-            .zip(&without.data)
-            .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
-            .collect(),
-        ..with.clone()
-    };
-    let pre = preprocessed(&sim, rise, Some(sc.ambient_c + ZERO_C_K), sc.sensor.blur_px);
-    let rad = Radiometry::new(&pre, &rays, model()).unwrap();
+    let (sim, rays, rad) = car_rise(1);
     let problem = thermal_problem(&sim, &rays, &rad);
-    let mut cfg = HumanConfig {
-        iterations: 30,
-        top_k: 6,
-        ..HumanConfig::default()
-    };
-    cfg.radiometric.polish_iterations = 10;
-    cfg.search.yaw_bins = 4;
-    cfg.search.distances = 3;
-    cfg.search.pose_modes = vec!["stand".into()];
+    let mut cfg = small_search();
     cfg.radiometric.rise_pass_max_mask_px = 0;
     assert!(problem.rise_pass(&cfg).is_none());
     let (mask, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
@@ -367,6 +321,56 @@ fn the_rise_pass_reports_the_facing_the_mask_search_chose() {
         "both sides reported: {off:?}"
     );
     assert!(off[0] < 90.0, "{off:?}");
+    // Guarded to moves of a micrometre, the mask pass's hypotheses are reported.
+    cfg.radiometric.rise_pass_max_move_m = 1e-6;
+    let (guarded, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
+    assert_eq!(guarded.candidates, both.candidates);
+    let roots = |f: &irmirror_recon::human::HumanFit| -> Vec<[f64; 3]> {
+        f.hypotheses.iter().map(|h| h.translation_m).collect()
+    };
+    assert_eq!(roots(&guarded), roots(&mask));
+    assert_ne!(roots(&both), roots(&mask));
+}
+
+/// Car capture `seed` with the true objects' footprint rays and the radiometric term of its
+/// rendered rise.
+fn car_rise(
+    seed: u64,
+) -> (
+    irmirror_sim::Simulation,
+    irmirror_render::reflect::ReflectedRays<f64>,
+    irmirror_recon::human::radiometric::Radiometry,
+) {
+    use irmirror_capture::planck::{ZERO_C_K, temperature_of};
+    let (sc, sim, _) = car_capture(seed);
+    let rays = true_object_footprint_rays(&sc, &sim);
+    let (with, without) = &sim.radiance;
+    let rise = irmirror_capture::Image {
+        data: with
+            .data
+            .iter()
+            .zip(&without.data)
+            .map(|(a, b)| temperature_of(*a) - temperature_of(*b))
+            .collect(),
+        ..with.clone()
+    };
+    let pre = preprocessed(&sim, rise, Some(sc.ambient_c + ZERO_C_K), sc.sensor.blur_px);
+    let rad = irmirror_recon::human::radiometric::Radiometry::new(&pre, &rays, model()).unwrap();
+    (sim, rays, rad)
+}
+
+/// A small stage 2 (4 facings × 3 distances, standing; 30 steps, a 10-step polish, 6 kept).
+fn small_search() -> irmirror_recon::human::HumanConfig {
+    let mut cfg = irmirror_recon::human::HumanConfig {
+        iterations: 30,
+        top_k: 6,
+        ..Default::default()
+    };
+    cfg.radiometric.polish_iterations = 10;
+    cfg.search.yaw_bins = 4;
+    cfg.search.distances = 3;
+    cfg.search.pose_modes = vec!["stand".into()];
+    cfg
 }
 
 /// Stage 2's problem on `rays` (up +Z, no floor) with the radiometric term `rad`.
