@@ -203,7 +203,7 @@ pub(super) fn diagnose(
         radiometry: rad.as_ref(),
         build: hcfg.build,
     };
-    let truth = truth_vertices(p);
+    let truth = p.truth.vertices();
     let (truth_loss, _) = problem.mesh_data_loss(&truth, &hcfg);
     // The truth turned around (180° about its up axis through the root).
     let root = p.sim.body.joints[0];
@@ -425,15 +425,9 @@ pub(super) fn ceiling(
     (seed, cfg): (u64, &ReconConfig),
 ) -> Result<Option<Ceiling>, EvalError> {
     let hcfg = cfg.human_settings();
-    let truth = truth_vertices(p);
+    let truth = p.truth.vertices();
     let start = model_truth(p, priors, &truth, (&hcfg.build, hcfg.lr_residual > 0.0))?;
     ceiling_from(&start, p, priors, rec, (seed, cfg))
-}
-
-/// The true body's vertices, depth frame.
-fn truth_vertices(p: &Prepared) -> Vec<Vector3<f64>> {
-    let v = &p.sim.body.mesh.vertices;
-    v.iter().map(|v| Vector3::from(v.map(f64::from))).collect()
 }
 
 /// [`ceiling`] from `start`.
@@ -476,8 +470,9 @@ fn refine_from_truth(
 
 /// Stage 2's refinement of one start as `fit_human` runs it on each survivor of the search
 /// whose states it reports: the mask's schedule when a thermal polish follows (the rise
-/// throughout otherwise, and in the rise pass of a small reflection), then the polish on the
-/// rise when the capture has one. `None`: it diverged.
+/// throughout otherwise, and in the rise pass of a small reflection — even where its guard
+/// then reports the mask pass's states), then the polish on the rise when the capture has one.
+/// `None`: it diverged.
 pub(super) fn refine_as_fit(
     problem: &HumanProblem<'_>,
     start: &HumanState,
