@@ -86,15 +86,16 @@ pub struct RadiometricConfig {
     pub polish_iterations: usize,
     /// On a reflection of at most this many pixels (with rays), the rise pass
     /// ([`super::HumanProblem::rise_pass`]): a second search fits the rise throughout, the
-    /// mask's gives the side. 0 (default): never. 50 on the held-out hard view (Lepton-like,
+    /// mask's gives the side. 0: never. 50 (default) on the held-out hard view (Lepton-like,
     /// 12–47 pixels): root median 0.199 → 0.162 m (paired −0.044 ± 0.039 m), facing within 30°
-    /// 13 → 12 of 24; but on the paper-like tabletops' ten captures that small (14–57 pixels,
-    /// most already lost) a bowl went 0.20 → 1.77 m and a mug 0.11 → 0.68 m off (EXPERIMENTS.md,
-    /// "Fortieth run"): for a low-resolution camera, not by default.
+    /// 13 → 12 of 24; on the paper-like tabletops' ten captures that small (14–69 pixels) a
+    /// bowl went 0.20 → 1.77 m and a mug 0.11 → 0.68 m off without the guard
+    /// (`rise_pass_max_move_m`), with it one bowl 0.04 → 0.27 m and the cells' medians
+    /// unchanged (EXPERIMENTS.md, "Fortieth run").
     pub rise_pass_max_mask_px: usize,
     /// The rise pass's states are reported only when its first lies within this distance of
-    /// the mask search's winner (m; 0: always): the mask's search finds the basin, the rise
-    /// places the person in it.
+    /// the mask search's winner (m; 0: always; default 0.5): the mask's search finds the
+    /// basin, the rise places the person in it.
     pub rise_pass_max_move_m: f64,
     /// Refined hypotheses that take the polish: the best this many by the rise before it, and
     /// the best one's front/back partner (the pair the rise is there to tell apart); the others
@@ -137,8 +138,8 @@ impl Default for RadiometricConfig {
             reflectance_bound_sigmas: 2.0,
             huber_sigmas: 3.0,
             polish_iterations: 40,
-            rise_pass_max_mask_px: 0,
-            rise_pass_max_move_m: 0.0,
+            rise_pass_max_mask_px: 50,
+            rise_pass_max_move_m: 0.5,
             polish_best: 1,
             polish_lr_scale: 0.25,
             polish_rays: 8000,

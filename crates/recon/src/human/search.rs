@@ -45,11 +45,11 @@
 //!    on 4 of 8 tuning bowls (0.111 → 0.188, 0.198 → 0.293, 0.132 → 0.253); on the fixed
 //!    batch at half the rates on 1. A larger capture (a car door) keeps the fresh
 //!    draws at the full rates ([`HumanProblem::refine_sample`]).
-//! 4. **The rise pass** (off by default): on a reflection of at most `rise_pass_max_mask_px`
-//!    pixels, steps 1–3 run again with the rise throughout and their hypotheses
-//!    are reported, the best on the first pass's winner's side (facing within 90° of it) first
-//!    ([`HumanProblem::rise_pass`]): the rise places the person, the mask's search with its
-//!    polish chooses front or back.
+//! 4. **The rise pass**: on a reflection of at most `rise_pass_max_mask_px` pixels (50),
+//!    steps 1–3 run again with the rise throughout and their hypotheses are reported, the
+//!    best on the first pass's winner's side (facing within 90° of it) first, unless it lies
+//!    more than `rise_pass_max_move_m` (0.5 m) from that winner ([`HumanProblem::rise_pass`]):
+//!    the rise places the person, the mask's search with its polish chooses front or back.
 
 use super::polish::{polish_refined, polish_rise};
 use super::problem::{Draw, FullEval};
