@@ -95,9 +95,10 @@ fn eval_probes_the_refinement_basin() {
     }
 }
 
-/// `eval --variants full,true-objects,true-shape,true-radiometry --basin 0,0 --basin-poses …`:
-/// the oracle runs see the simulator's objects, the person's body shape and surface
-/// temperatures (each its own table, paired with the fit), and the basin probe starts from
+/// `eval --variants full,true-objects,true-shape,true-height,true-build,true-radiometry
+/// --basin 0,0 --basin-poses …`: the oracle runs see the simulator's objects, the person's body
+/// shape (both halves, and each alone) and surface temperatures (each its own table, paired
+/// with the fit), and the basin probe starts from
 /// the true root and facing with the poses asked, in turn (`truth-twin`: the true pose's
 /// silhouette twin, `bank`: through the pose bank, `limbs`: through the limb search); an
 /// unknown pose is a clear error.
@@ -109,7 +110,7 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
             "--cell",
             "tabletop-bowl",
             "--variants",
-            "full,true-objects,true-shape,true-radiometry",
+            "full,true-objects,true-shape,true-height,true-build,true-radiometry",
             "--basin",
             "0,0",
             "--basin-poses",
@@ -120,7 +121,14 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     let c = &results["captures"][0];
-    for v in ["full", "true-objects", "true-shape", "true-radiometry"] {
+    for v in [
+        "full",
+        "true-objects",
+        "true-shape",
+        "true-height",
+        "true-build",
+        "true-radiometry",
+    ] {
         assert!(c["variants"][v]["eval"]["root_error_m"].is_f64(), "{c}");
     }
     let poses: Vec<&str> = c["diagnosis"]["basin"]
@@ -134,6 +142,8 @@ fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     for row in [
         "within 15 cm and 30°, true objects / fitted objects",
         "within 15 cm and 30°, true shape / fitted shape",
+        "within 15 cm and 30°, true height / height prior",
+        "within 15 cm and 30°, true build / mean build",
         "within 15 cm and 30°, true temperatures / cited ranges",
         "| tabletop-bowl | 1 | truth-twin | 1 (±0.00 m, ±0°) |",
         "| tabletop-bowl | 1 | truth-latent | 1 (±0.00 m, ±0°) |",

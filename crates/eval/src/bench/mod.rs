@@ -110,6 +110,13 @@ pub enum Variant {
     /// measures what the mean adult's build costs the person; runs only when `--variants`
     /// names it).
     TrueShape,
+    /// The true shape's first half: the height prior's mean at the person's true height
+    /// slider, the mean adult's build (an oracle; runs only when `--variants` names it).
+    TrueHeight,
+    /// The true shape's second half: the person's true build (the phenotype's sliders but the
+    /// height), the height prior as in the full model (an oracle; runs only when `--variants`
+    /// names it).
+    TrueBuild,
     /// The full model told each person's true surface temperatures: the thermal term's
     /// regions (face, hair, bare skin, clothing) centred at the simulator's instead of their
     /// cited ranges' centres (an oracle, not a method: it measures what the regions' unknown
@@ -119,7 +126,7 @@ pub enum Variant {
 
 impl Variant {
     /// Every variant, in the table's column order.
-    pub const ALL: [Variant; 8] = [
+    pub const ALL: [Variant; 10] = [
         Variant::NoEdgeSampling,
         Variant::NoSphereTracing,
         Variant::NoSmoothing,
@@ -127,6 +134,8 @@ impl Variant {
         Variant::Full,
         Variant::TrueObjects,
         Variant::TrueShape,
+        Variant::TrueHeight,
+        Variant::TrueBuild,
         Variant::TrueRadiometry,
     ];
 
@@ -134,7 +143,11 @@ impl Variant {
     pub fn on_request_only(self) -> bool {
         matches!(
             self,
-            Variant::TrueObjects | Variant::TrueShape | Variant::TrueRadiometry
+            Variant::TrueObjects
+                | Variant::TrueShape
+                | Variant::TrueHeight
+                | Variant::TrueBuild
+                | Variant::TrueRadiometry
         )
     }
 
@@ -153,6 +166,8 @@ impl Variant {
             Variant::Full => "full model",
             Variant::TrueObjects => "full model through the true objects (oracle)",
             Variant::TrueShape => "full model with the true body shape (oracle)",
+            Variant::TrueHeight => "full model with the true height (oracle)",
+            Variant::TrueBuild => "full model with the true build (oracle)",
             Variant::TrueRadiometry => "full model with the true surface temperatures (oracle)",
         }
     }
@@ -164,9 +179,12 @@ impl Variant {
             Variant::NoSphereTracing => Some(Ablation::SphereTracing),
             Variant::NoSmoothing => Some(Ablation::Smoothing),
             Variant::NoRadiometric => Some(Ablation::Radiometric),
-            Variant::Full | Variant::TrueObjects | Variant::TrueShape | Variant::TrueRadiometry => {
-                None
-            }
+            Variant::Full
+            | Variant::TrueObjects
+            | Variant::TrueShape
+            | Variant::TrueHeight
+            | Variant::TrueBuild
+            | Variant::TrueRadiometry => None,
         }
     }
 }
@@ -438,7 +456,7 @@ mod tests {
             "{t}"
         );
         assert!(
-            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | 0 of 2 | 0 of 2 | 0 of 2 | – |"),
+            t.contains("| failed reconstructions | tabletop-mug | 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 3 | 1 of 3 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 2 | 0 of 2 | – |"),
             "{t}"
         );
         assert!(

@@ -240,10 +240,12 @@ fn run_capture(
     for &variant in variants {
         let mut cfg = base.clone();
         cfg.ablate.extend(variant.ablation());
-        if variant == Variant::TrueShape {
-            let truth = p.scene.person.phenotype;
+        let truth = p.scene.person.phenotype;
+        if matches!(variant, Variant::TrueShape | Variant::TrueBuild) {
             cfg.human.build = truth;
             cfg.human.search.builds.clear();
+        }
+        if matches!(variant, Variant::TrueShape | Variant::TrueHeight) {
             cfg.human.height_prior[0] = truth.height;
         }
         if variant == Variant::TrueRadiometry {

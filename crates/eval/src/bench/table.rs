@@ -119,6 +119,16 @@ pub fn markdown_table(r: &Report) -> String {
     ));
     s.push_str(&paired_table(
         r,
+        (Variant::TrueHeight, "true height"),
+        (Variant::Full, "height prior"),
+    ));
+    s.push_str(&paired_table(
+        r,
+        (Variant::TrueBuild, "true build"),
+        (Variant::Full, "mean build"),
+    ));
+    s.push_str(&paired_table(
+        r,
         (Variant::TrueRadiometry, "true temperatures"),
         (Variant::Full, "cited ranges"),
     ));
