@@ -98,10 +98,9 @@ fn eval_probes_the_refinement_basin() {
 /// `eval --variants full,true-objects,true-shape,true-height,true-build,true-radiometry
 /// --basin 0,0 --basin-poses …`: the oracle runs see the simulator's objects, the person's body
 /// shape (both halves, and each alone) and surface temperatures (each its own table, paired
-/// with the fit), and the basin probe starts from
-/// the true root and facing with the poses asked, in turn (`truth-twin`: the true pose's
-/// silhouette twin, `bank`: through the pose bank, `limbs`: through the limb search); an
-/// unknown pose is a clear error.
+/// with the fit), and the basin probe starts from the true root and facing with the poses
+/// asked, in turn (`truth-twin`: the true pose's silhouette twin, `bank`: through the pose
+/// bank, `limbs`: through the limb search); an unknown pose is a clear error.
 #[test]
 fn eval_runs_the_true_objects_oracle_and_chosen_basin_poses() {
     let (o, out) = cheap_eval(
