@@ -33,7 +33,7 @@ pub enum AblateArg {
     EdgeSampling,
     /// Gradient projection instead of K = 3 sphere-tracing steps.
     SphereTracing,
-    /// Raw SDF normals instead of the 3×3 average.
+    /// Raw SDF normals instead of the surface smoothing (a 2-mm ring about each hit).
     Smoothing,
     /// Fit the binary reflection mask (the paper's data term) instead of the thermal rise.
     Radiometric,

@@ -26,7 +26,7 @@ pub enum Ablation {
     EdgeSampling,
     /// Gradient projection of the coarse point instead of K = 3 sphere-tracing steps.
     SphereTracing,
-    /// Raw SDF normals instead of the 3×3 average.
+    /// Raw SDF normals instead of the surface smoothing (a 2-mm ring about each hit).
     Smoothing,
     /// The binary mask's soft IoU (the paper's data term) instead of the thermal rise.
     Radiometric,

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //!  camera pixel ─ray─► SDF objects (sdf) ─sphere_trace─► surface point + normal
-//!        ─(smoothing over 3×3 pixels)─► reflect ─► ReflectedRays (once per capture)
+//!        ─(smoothing over a ring on the surface)─► reflect ─► ReflectedRays (once per capture)
 //!  ReflectedRays × body mesh ─occupancy (BVH-culled)─► I_i ─soft_iou_loss─► L
 //!  ∂L/∂I ─occupancy backward─► ∂L/∂(vertices, ray origins, ray directions)
 //!  ReflectedRays × mesh ─hard─► binary reflection mask (simulator, reports)
