@@ -508,6 +508,22 @@ mod tests {
     }
 
     #[test]
+    fn smoothing_ring_is_relative_then_capped() {
+        let ring = |radius: f64, scale: f64| {
+            smoothing_radius(&PlacedSdf {
+                sdf: Arc::new(Sphere { radius }),
+                depth_from_object: Similarity3::new(Matrix3::identity(), Vector3::zeros(), scale)
+                    .unwrap(),
+            })
+        };
+        // A 7-cm bowl: 1 % of its radius; a 2.3-m car, or a small shape scaled up: the cap.
+        assert!((ring(0.07, 1.0) - 7e-4).abs() < 1e-12);
+        assert!((ring(0.035, 2.0) - 7e-4).abs() < 1e-12);
+        assert_eq!(ring(2.3, 1.0), SMOOTHING_RADIUS_MAX);
+        assert_eq!(ring(0.5, 1.0), SMOOTHING_RADIUS_MAX);
+    }
+
+    #[test]
     fn smoothing_averages_out_ripples_shorter_than_its_ring() {
         // Ripples of 0.3 × the ring's radius r (the cap on this 1-m sphere) with a wavelength of
         // twice the ring's diameter (freq = π / (2 r)): its 8 points sample them half a period
