@@ -25,13 +25,13 @@ pub enum Normals {
 /// a 7-cm bowl), at most [`SMOOTHING_RADIUS_MAX`]. A fixed patch of the surface, not of the
 /// image: the 3 × 3 neighbouring pixels used before spanned 0.5–1 cm of a bowl at 160 × 120
 /// (more at its rim), and their mean moved the reflected rays so far that the true body,
-/// rendered through the true objects, missed 10–28 % of the simulator's noise-free rise on the
+/// rendered through the true objects, missed 11–28 % of the simulator's noise-free rise on the
 /// hard view's captures (1–3 % with unsmoothed normals; EXPERIMENTS.md, "Forty-second run").
 pub const SMOOTHING_RADIUS_REL: f64 = 0.01;
 
 /// The ring's largest radius in metres: the scale of a learned surface's ripples. Uncapped, 1 %
-/// of a car's radius is 2.3 cm, which averaged across the fitted car's rounded edges and lost
-/// the car cell every figure (EXPERIMENTS.md, "Forty-second run").
+/// of a car's radius is 2.3 cm, which averaged across the fitted car's rounded edges and made
+/// every figure of the car cell worse (EXPERIMENTS.md, "Forty-second run").
 pub const SMOOTHING_RADIUS_MAX: f64 = 0.002;
 
 /// The surface smoothing ring's radius for `object`, in the depth frame's metres.
