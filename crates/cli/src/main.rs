@@ -192,6 +192,11 @@ enum Command {
         /// Only the first N (≥ 1) captures of each cell.
         #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
         limit: Option<u64>,
+        /// Only these captures (comma-separated ids as results.json names them, e.g.
+        /// `tabletop-wide_53`): one capture of a table again, with `--keep-captures` to
+        /// reconstruct it by hand.
+        #[arg(long, value_name = "ID,...", value_delimiter = ',')]
+        only: Vec<String>,
         /// Only this cell.
         #[arg(long, value_enum)]
         cell: Option<Cell>,
@@ -449,6 +454,7 @@ fn main() -> std::process::ExitCode {
             preset,
             out,
             limit,
+            only,
             cell,
             shapes,
             full_only,
@@ -468,6 +474,7 @@ fn main() -> std::process::ExitCode {
                 &out,
                 &irmirror_eval::bench::Selection {
                     limit: limit.map(|l| l as usize),
+                    only,
                     cell,
                     shapes,
                     full_only,
