@@ -82,6 +82,40 @@ fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
+/// Object pixels farther than this from the thresholded reflection give the data term's noise
+/// σ (the blur's halo below the threshold lies within it: the captures' point spread is
+/// σ ≈ 0.5 px).
+const QUIET_MARGIN_PX: u32 = 2;
+
+/// Fewer quiet object pixels than this: the MAD of all of them gives the noise σ.
+const MIN_QUIET_PX: usize = 50;
+
+/// The rises' noise σ about their median `med`, where they are (nearly) all noise: the MAD's
+/// σ, then twice the standard deviation of the values within 3σ (scaled by the 3σ-truncated
+/// normal's 0.98658), which reflection pixels within 3σ would inflate — hence the quiet pixels
+/// only. The MAD alone is a quantile of values on
+/// the ADC's lattice (one count ≈ 15 mK near room temperature at 14 bits over −40…150 °C, and
+/// a rise is the difference of two such values), so it snaps to a multiple of the count: at 50
+/// mK NETD it read 5 % low, at 30 mK 4 % high, and the data term's noise floor with it
+/// (EXPERIMENTS.md, "Forty-fourth run"). 0 when more than half the values equal the median.
+fn noise_sigma(on: &[f64], med: f64) -> f64 {
+    /// √(1 − 2·3·φ(3) / (2Φ(3) − 1)): the σ of a standard normal truncated at ±3.
+    const TRUNCATED_3: f64 = 0.986_58;
+    let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
+    let mut sigma = 1.4826 * median(&mut dev);
+    for _ in 0..2 {
+        if sigma <= 0.0 {
+            break;
+        }
+        let (n, ss) = dev
+            .iter()
+            .filter(|d| **d <= 3.0 * sigma)
+            .fold((0usize, 0.0), |(n, ss), d| (n + 1, ss + d * d));
+        sigma = (ss / n.max(1) as f64).sqrt() / TRUNCATED_3;
+    }
+    sigma
+}
+
 fn local_median(img: &Image<f64>, window: u32) -> Image<f64> {
     let r = i64::from(window / 2);
     let (w, h) = (img.width as i64, img.height as i64);
@@ -219,13 +253,14 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
             .collect();
         median(&mut b)
     });
-    // Robust noise: MAD of the rises (the reflection is a small minority of object pixels).
     let med = median(&mut on.clone());
+    // The threshold's robust σ: the MAD, which the reflection (a small minority of object
+    // pixels) does not move.
     let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
-    let noise = 1.4826 * median(&mut dev);
+    let mad_sigma = 1.4826 * median(&mut dev);
     let threshold_k = match cfg.threshold {
         Threshold::DeltaK(k) => k,
-        Threshold::Otsu { noise_sigmas } => otsu(&on).max(med + noise_sigmas * noise).max(1e-6),
+        Threshold::Otsu { noise_sigmas } => otsu(&on).max(med + noise_sigmas * mad_sigma).max(1e-6),
     };
     let raw = Image {
         width: t.width,
@@ -236,6 +271,22 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
             .zip(&objects.data)
             .map(|(r, o)| *o && *r > threshold_k)
             .collect(),
+    };
+    // The data term's σ: away from the reflection and its blur, off the ADC's lattice.
+    let near = dilate(&raw, QUIET_MARGIN_PX);
+    let quiet: Vec<f64> = rise
+        .data
+        .iter()
+        .zip(&objects.data)
+        .zip(&near.data)
+        .filter(|((_, o), n)| **o && !**n)
+        .map(|((r, _), _)| *r)
+        .collect();
+    let noise = if quiet.len() >= MIN_QUIET_PX {
+        let m = median(&mut quiet.clone());
+        noise_sigma(&quiet, m)
+    } else {
+        mad_sigma
     };
     let mask = remove_small_components(
         &close(&open(&raw, cfg.open_px), cfg.close_px),
@@ -275,6 +326,40 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Rises as the ADC makes them (two frames, each rounded to a count of `q`), and 1 % of
+    /// reflection pixels far above: the estimate within 2 % of the sample's σ at every NETD,
+    /// where the MAD alone was off by up to 5 %.
+    #[test]
+    fn noise_sigma_sees_through_the_adc_lattice() {
+        use rand::SeedableRng;
+        let q = 0.0153;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut mad_worst: f64 = 0.0;
+        for netd in [0.03, 0.05, 0.08] {
+            let count = |rng: &mut rand::rngs::StdRng| {
+                let z: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
+                q * (netd * z / q).round()
+            };
+            let noise: Vec<f64> = (0..3000)
+                .map(|_| count(&mut rng) - count(&mut rng))
+                .collect();
+            let truth = (noise.iter().map(|r| r * r).sum::<f64>() / noise.len() as f64).sqrt();
+            let mut on = noise.clone();
+            on.extend((0..30).map(|i| 0.5 + 0.01 * f64::from(i)));
+            let med = median(&mut on.clone());
+            let est = noise_sigma(&on, med);
+            assert!(
+                (est / truth - 1.0).abs() < 0.02,
+                "NETD {netd}: {est} vs {truth}"
+            );
+            let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
+            mad_worst = mad_worst.max((1.4826 * median(&mut dev) / truth - 1.0).abs());
+        }
+        // What the estimate is there for: the lattice's bias in the MAD.
+        assert!(mad_worst > 0.03, "{mad_worst}");
+        assert_eq!(noise_sigma(&[0.1; 9], 0.1), 0.0);
+    }
 
     #[test]
     fn otsu_splits_two_clusters() {
