@@ -93,11 +93,11 @@ const MIN_QUIET_PX: usize = 50;
 /// The rises' noise σ about their median `med`, where they are (nearly) all noise: the MAD's
 /// σ, then twice the standard deviation of the values within 3σ (scaled by the 3σ-truncated
 /// normal's 0.98658), which reflection pixels within 3σ would inflate — hence the quiet pixels
-/// only. The MAD alone is a quantile of values on
-/// the ADC's lattice (one count ≈ 15 mK near room temperature at 14 bits over −40…150 °C, and
-/// a rise is the difference of two such values), so it snaps to a multiple of the count: at 50
-/// mK NETD it read 5 % low, at 30 mK 4 % high, and the data term's noise floor with it
-/// (EXPERIMENTS.md, "Forty-fourth run"). 0 when more than half the values equal the median.
+/// only. The MAD alone is a quantile of values on the ADC's lattice (one count ≈ 15 mK near
+/// room temperature at 14 bits over −40…150 °C, and a rise is the difference of two such
+/// values), so it snaps to a multiple of the count: at 50 mK NETD it read 5 % low, at 30 mK 4 %
+/// high, and the data term's noise floor with it (EXPERIMENTS.md, "Forty-fourth run"). 0 when
+/// more than half the values equal the median.
 fn noise_sigma(on: &[f64], med: f64) -> f64 {
     /// √(1 − 2·3·φ(3) / (2Φ(3) − 1)): the σ of a standard normal truncated at ±3.
     const TRUNCATED_3: f64 = 0.986_58;
