@@ -90,6 +90,13 @@ const QUIET_MARGIN_PX: u32 = 2;
 /// Fewer quiet object pixels than this: the MAD of all of them gives the noise σ.
 const MIN_QUIET_PX: usize = 50;
 
+/// The MAD's σ of `values` about `med`: 1.4826 · median |v − med|, the normal's σ from a median
+/// that a minority of outliers (the reflection's pixels) does not move.
+fn mad_sigma(values: &[f64], med: f64) -> f64 {
+    let mut dev: Vec<f64> = values.iter().map(|v| (v - med).abs()).collect();
+    1.4826 * median(&mut dev)
+}
+
 /// The rises' noise σ about their median `med`, where they are (nearly) all noise: the MAD's
 /// σ, then twice the standard deviation of the values within 3σ (scaled by the 3σ-truncated
 /// normal's 0.98658), which reflection pixels within 3σ would inflate — hence the quiet pixels
@@ -101,8 +108,8 @@ const MIN_QUIET_PX: usize = 50;
 fn noise_sigma(on: &[f64], med: f64) -> f64 {
     /// √(1 − 2·3·φ(3) / (2Φ(3) − 1)): the σ of a standard normal truncated at ±3.
     const TRUNCATED_3: f64 = 0.986_58;
-    let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
-    let mut sigma = 1.4826 * median(&mut dev);
+    let dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
+    let mut sigma = mad_sigma(on, med);
     for _ in 0..2 {
         if sigma <= 0.0 {
             break;
@@ -256,11 +263,10 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
     let med = median(&mut on.clone());
     // The threshold's robust σ: the MAD, which the reflection (a small minority of object
     // pixels) does not move.
-    let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
-    let mad_sigma = 1.4826 * median(&mut dev);
+    let mad = mad_sigma(&on, med);
     let threshold_k = match cfg.threshold {
         Threshold::DeltaK(k) => k,
-        Threshold::Otsu { noise_sigmas } => otsu(&on).max(med + noise_sigmas * mad_sigma).max(1e-6),
+        Threshold::Otsu { noise_sigmas } => otsu(&on).max(med + noise_sigmas * mad).max(1e-6),
     };
     let raw = Image {
         width: t.width,
@@ -286,7 +292,7 @@ pub fn preprocess(capture: &Capture, cfg: &PreprocessConfig) -> Result<Preproces
         let m = median(&mut quiet.clone());
         noise_sigma(&quiet, m)
     } else {
-        mad_sigma
+        mad
     };
     let mask = remove_small_components(
         &close(&open(&raw, cfg.open_px), cfg.close_px),
@@ -353,8 +359,7 @@ mod tests {
                 (est / truth - 1.0).abs() < 0.02,
                 "NETD {netd}: {est} vs {truth}"
             );
-            let mut dev: Vec<f64> = on.iter().map(|r| (r - med).abs()).collect();
-            mad_worst = mad_worst.max((1.4826 * median(&mut dev) / truth - 1.0).abs());
+            mad_worst = mad_worst.max((mad_sigma(&on, med) / truth - 1.0).abs());
         }
         // What the estimate is there for: the lattice's bias in the MAD.
         assert!(mad_worst > 0.03, "{mad_worst}");
