@@ -556,7 +556,9 @@ impl Radiometry {
         // Per pixel: its covered footprint's share of each region (the prediction before
         // reflectance is its dot product with the contrasts) — or, with the common offset
         // alone, that share weighted by `a` and by `b` (the prediction is their combination at
-        // Δ) — and the object.
+        // Δ) — and the object. The moments would serve both, but summed in another order: the
+        // common offset keeps its own sums so that the default reproduces, to the digit, the
+        // fits every published figure was measured with (stage 2 follows last bits).
         let m: Vec<[f64; REGIONS]> = if spreads {
             (0..n).map(|p| input.covered_by_region(p)).collect()
         } else {
