@@ -194,7 +194,7 @@ pub fn reconstruct(
 /// a fit that is a fraction of a pixel small: 2 of 4 mug captures had no mask pixel left).
 ///
 /// With the radiometric term on and a reflection mask of at most `footprint_max_mask_px`
-/// pixels, every pixel near an object is sampled at [`FOOTPRINT_OFFSETS`] instead (its rays
+/// pixels, every pixel near an object is sampled at a grid of sub-pixel nodes instead (its rays
 /// next to each other; see [`footprint_rays`]). With `[mirror] enabled`, large objects' rays
 /// are then re-reflected off the depth data where it agrees with the fit
 /// ([`crate::depth_mirror`]).
@@ -261,6 +261,7 @@ pub fn reflected_rays_through(
             placed,
             &trace,
             normals,
+            hcfg.radiometric.footprint_max_rays,
         );
         return unblocked(&rays, placed, plane, &trace);
     }
@@ -290,25 +291,36 @@ pub fn reflected_rays_through(
     unblocked(&all_rays, placed, plane, &trace)
 }
 
-/// Where a pixel's box is sampled, pixels from its centre: the 2 × 2 Gauss–Legendre nodes
-/// `±1/√12` (exact for coverage that varies linearly or quadratically across the pixel). The
-/// optics' point spread is applied to the samples' sums as a convolution (`radiometric`).
-pub const FOOTPRINT_OFFSETS: [(f64, f64); 4] = {
-    const S: f64 = 0.288_675_134_594_812_9;
-    [(-S, -S), (S, -S), (-S, S), (S, S)]
-};
+/// Most nodes per axis of a pixel's footprint grid ([`footprint_offsets`]).
+pub const FOOTPRINT_MAX_NODES: u32 = 4;
+
+/// Where a pixel's box is sampled, pixels from its centre: the `n × n` midpoint grid
+/// (`(i + ½)/n − ½`), x fastest. A reflection's edge crosses a pixel as a step, which a midpoint
+/// grid integrates to `1/n²` of the pixel; against a simulator that integrates the box by 8 × 8
+/// rays, the truth's data term through the true objects on the hard view's 30-mK captures was
+/// 0.068 with 2 × 2 nodes and 0.005 (the noise) with 4 × 4. The optics' point spread is
+/// applied to the samples' sums as a convolution (`radiometric`).
+pub fn footprint_offsets(n: u32) -> Vec<(f64, f64)> {
+    let n = n.max(1);
+    let at = |i: u32| (f64::from(i) + 0.5) / f64::from(n) - 0.5;
+    (0..n)
+        .flat_map(|j| (0..n).map(move |i| (at(i), at(j))))
+        .collect()
+}
 
 /// Every thermal pixel within reach of an object (a centre ray hits one in its 3 × 3
-/// neighbourhood) sampled at the 4 [`FOOTPRINT_OFFSETS`], reflected; a pixel's rays lie next to each other in
-/// pixel order, and a node that misses every object has none (it counts as showing the room).
+/// neighbourhood) sampled at the finest [`footprint_offsets`] grid (2 × 2 up to
+/// [`FOOTPRINT_MAX_NODES`]²) whose rays stay within `max_rays`, reflected; a pixel's rays lie
+/// next to each other in pixel order, and a node that misses every object has none (it counts
+/// as showing the room).
 pub fn footprint_rays(
     cam: &PinholeCamera,
     depth_from_camera: &Rigid3<f64>,
     placed: &[irmirror_render::sdf::PlacedSdf],
     trace: &TraceParams,
     normals: Normals,
+    max_rays: usize,
 ) -> ReflectedRays<f64> {
-    let offsets = FOOTPRINT_OFFSETS;
     let centres = reflect_camera(cam, depth_from_camera, placed, trace, normals);
     let (w, h) = (cam.width as i64, cam.height as i64);
     let reach = 1;
@@ -321,12 +333,18 @@ pub fn footprint_rays(
             }
         }
     }
+    let reachable = near.iter().filter(|&&n| n).count();
+    let nodes = (2..=FOOTPRINT_MAX_NODES)
+        .rev()
+        .find(|&n| (n * n) as usize * reachable <= max_rays)
+        .unwrap_or(2);
+    let offsets = footprint_offsets(nodes);
     let mut all = ReflectedRays {
         width: cam.width,
         height: cam.height,
         ..Default::default()
     };
-    for offset in offsets {
+    for &offset in &offsets {
         all.extend(&reflect_camera_at(
             cam,
             depth_from_camera,
@@ -470,4 +488,36 @@ pub fn reconstruct_human(
         human,
         states,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::footprint_offsets;
+
+    /// The midpoint grid: n² nodes inside the box, centred, and a step edge at any multiple of
+    /// 1/n covers exactly its share of them (what a half-covered pixel's rise relies on).
+    #[test]
+    fn footprint_grid_is_centred_and_integrates_edges_on_its_lattice() {
+        for n in 1..=4u32 {
+            let nodes = footprint_offsets(n);
+            assert_eq!(nodes.len(), (n * n) as usize);
+            let (sx, sy) = nodes
+                .iter()
+                .fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+            assert!(
+                sx.abs() < 1e-12 && sy.abs() < 1e-12,
+                "n {n}: mean ({sx}, {sy})"
+            );
+            assert!(nodes.iter().all(|(x, y)| x.abs() < 0.5 && y.abs() < 0.5));
+            for k in 0..=n {
+                let edge = f64::from(k) / f64::from(n) - 0.5;
+                let share =
+                    nodes.iter().filter(|(x, _)| *x < edge).count() as f64 / nodes.len() as f64;
+                let rows =
+                    nodes.iter().filter(|(_, y)| *y < edge).count() as f64 / nodes.len() as f64;
+                assert_eq!(share, f64::from(k) / f64::from(n), "n {n}, edge {edge}");
+                assert_eq!(rows, share, "n {n}: the grid is square");
+            }
+        }
+    }
 }

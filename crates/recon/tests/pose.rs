@@ -301,10 +301,11 @@ fn a_known_build_states_the_simulated_body() {
 
 /// The thermal polish descends from where the truth stands in our model (car seed 1, Lepton:
 /// the person's encoded pose on the mean adult, the true root): on its fixed, importance-
-/// weighted batch the loss on every ray does not rise and the root stays within 5 cm (measured:
-/// 0.550 → 0.236, 3.8 cm; with every ray as the batch 0.149, 2.7 cm). The polish stepped on
-/// fresh edge-weighted draws before, a random walk on another loss: from the truth it raised
-/// the rise's data term on 3 of 8 tuning bowls (one 0.198 → 0.323).
+/// weighted batch the loss on every ray does not rise and the root stays within 5 cm (measured
+/// with each pixel's 3 × 3 footprint grid: 0.531 → 0.110, 2.9 cm; a 2 × 2 grid against the
+/// simulator's 8 × 8 went 0.537 → 0.306 and 5.4 cm, a 4 × 4 0.533 → 0.135, 2.6 cm). The
+/// polish stepped on fresh edge-weighted draws before, a random walk on another loss: from the
+/// truth it raised the rise's data term on 3 of 8 tuning bowls (one 0.198 → 0.323).
 #[test]
 fn the_thermal_polish_descends_from_the_truth() {
     use irmirror_recon::human::*;
@@ -415,7 +416,9 @@ fn the_head_share_falls_where_the_mirror_sees_no_head() {
 /// The outline twin of a mesh keeps every vertex on its line of sight, so applying it twice
 /// gives the mesh back, and the mask term of the true body barely moves while the
 /// rise's data term, which sees the face and the arms' skin, rises (car seed 1; measured:
-/// mask 0.268 → 0.287 — a 4.9 m wide perspective from a car door —, rise 0.055 → 0.145).
+/// mask 0.226 → 0.260, +15 % — a 4.9 m wide perspective from a car door —, rise 0.031 →
+/// 0.117, 3.7×; with the simulator's 2 × 2 rays and stage 2's 2 × 2 grid, mask 0.268 → 0.287,
+/// rise 0.055 → 0.145).
 #[test]
 fn the_outline_twin_keeps_the_outline_and_turns_the_thermal_values() {
     use irmirror_recon::human::*;
@@ -447,8 +450,8 @@ fn the_outline_twin_keeps_the_outline_and_turns_the_thermal_values() {
             problem.mesh_data_loss(&twin, &mask).0,
         );
         eprintln!("rise {d0:.4} → {d1:.4}, mask {m0:.4} → {m1:.4}");
-        assert!((m1 - m0).abs() < 0.03, "mask {m0} → {m1}");
-        assert!(d1 > d0 + 0.005, "rise {d0} → {d1}");
+        assert!((m1 - m0).abs() < 0.2 * m0, "mask {m0} → {m1}");
+        assert!(d1 > 2.0 * d0 && d1 > d0 + 0.03, "rise {d0} → {d1}");
     });
 }
 

@@ -262,6 +262,7 @@ fn a_reflection_past_the_tables_edge_keeps_its_rays() {
         &placed,
         &trace,
         normals,
+        cfg.human_settings().radiometric.footprint_max_rays,
     );
     let blind = PlaneOccluder {
         plane: &plane,

@@ -70,8 +70,8 @@ fn radiometric_model_matches_the_simulated_rise() {
 }
 
 /// A pixel integrates its footprint: on a small reflection (Lepton-class car capture), the rise
-/// the simulator renders (2 × 2 sub-pixel rays, then the optics' Gaussian blur) is predicted
-/// by the radiometric term's observation operator (4 rays per pixel at `FOOTPRINT_OFFSETS`,
+/// the simulator renders (8 × 8 sub-pixel rays near edges, then the optics' Gaussian blur) is
+/// predicted by the radiometric term's observation operator (`footprint_offsets`' grid,
 /// convolved with the capture's point spread; hard hits on the true body here) much better
 /// than by one ray at each pixel's centre, edges and thin limbs included.
 #[test]
@@ -292,13 +292,14 @@ fn the_thermal_polish_takes_the_best_and_its_partner() {
 /// The rise pass (forced on by its threshold): twice the candidates, and the reported
 /// hypothesis first faces the mask search winner's way (within 90°) when any does (that
 /// search alone with the threshold at 0: the same seed gives the same first pass); with its
-/// guard at a micrometre, the mask pass's hypotheses.
+/// guard at a micrometre, the mask pass's hypotheses. Car seed 2: there the rise pass's states
+/// win unguarded (on seeds 1 and 3 the mask pass's own states win, so the guard is not seen).
 #[test]
 fn the_rise_pass_reports_the_facing_the_mask_search_chose() {
     use irmirror_geom::rotation::axis_angle_to_matrix;
     use irmirror_recon::human::Hypothesis;
     use irmirror_recon::human::search::{facing_angle_deg, fit_human};
-    let (sim, rays, rad) = car_rise(1);
+    let (sim, rays, rad) = car_rise(2);
     let problem = thermal_problem(&sim, &rays, &rad);
     let mut cfg = small_search();
     cfg.radiometric.rise_pass_max_mask_px = 0;

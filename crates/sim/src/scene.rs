@@ -272,7 +272,9 @@ pub struct Sensor {
     pub netd_mk: f64,
     /// Optics blur, Gaussian σ in pixels (0: none).
     pub blur_px: f64,
-    /// Sub-pixel rays per axis (total s²).
+    /// Sub-pixel rays per axis (total s²) that integrate a thermal pixel's box where the image
+    /// varies near it; flat neighbourhoods keep a 4 × 4 probe (`sensor::supersampled_adaptive`).
+    /// 8 (default): a pixel's coverage by a small reflection to within ≈ 1/64 of the pixel.
     pub supersample: u32,
     /// ADC bits of the raw thermal counts.
     pub bits: u32,
@@ -292,7 +294,7 @@ impl Default for Sensor {
         Self {
             netd_mk: 50.0,
             blur_px: 0.5,
-            supersample: 2,
+            supersample: 8,
             bits: 14,
             depth_noise_per_m2: 1.5e-3,
             depth_grazing_cos: 0.1,

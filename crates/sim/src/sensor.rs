@@ -14,18 +14,40 @@ use rayon::prelude::*;
 /// Reflection bounces followed from object surfaces (object → object → …).
 const BOUNCES: u32 = 3;
 
-/// Mean band radiance over `s × s` sub-pixel rays per pixel of `camera` (placed by
-/// `depth_from_camera`).
+/// Sub-pixel rays per axis of the probe that decides where a pixel needs its full grid.
+const PROBE: u32 = 4;
+
+/// Mean band radiance over each pixel's box of `camera` (placed by `depth_from_camera`):
+/// `s × s` sub-pixel rays where the image varies by more than `tol` within a pixel's
+/// neighbourhood, a 4 × 4 probe where it does not (see [`supersampled_adaptive`]).
 pub fn thermal_radiance(
     world: &World,
     camera: &PinholeCamera,
     depth_from_camera: &Rigid3<f64>,
     supersample: u32,
+    tol: f64,
 ) -> Image<f64> {
-    supersampled(camera, supersample, |u, v| {
+    supersampled_adaptive(camera, supersample, tol, |u, v| {
         let ray = depth_from_camera.transform_ray(&camera.ray_at::<f64>(u, v));
         world.radiance(&ray, BOUNCES)
     })
+}
+
+/// Mean of `value(u, v)` over an `s × s` grid of sub-pixel points in pixel `(col, row)`
+/// (pixel centres at +0.5), and the samples' min and max.
+fn pixel_grid(col: u32, row: u32, s: u32, value: &impl Fn(f64, f64) -> f64) -> (f64, f64, f64) {
+    let (mut sum, mut lo, mut hi) = (0.0, f64::INFINITY, f64::NEG_INFINITY);
+    for a in 0..s {
+        for b in 0..s {
+            let u = f64::from(col) + (f64::from(a) + 0.5) / f64::from(s);
+            let v = f64::from(row) + (f64::from(b) + 0.5) / f64::from(s);
+            let x = value(u, v);
+            sum += x;
+            lo = lo.min(x);
+            hi = hi.max(x);
+        }
+    }
+    (sum / f64::from(s * s), lo, hi)
 }
 
 /// Per pixel of `camera`, the mean of `value(u, v)` over an `s × s` grid of sub-pixel image
@@ -39,17 +61,54 @@ pub fn supersampled(
     let (w, h) = (camera.width, camera.height);
     let data = (0..w * h)
         .into_par_iter()
+        .map(|p| pixel_grid(p % w, p / w, s, &value).0)
+        .collect();
+    Image {
+        width: w,
+        height: h,
+        data,
+    }
+}
+
+/// [`supersampled`] at `s × s`, adaptively: every pixel is probed by 4 × 4 points; a pixel
+/// takes the full grid only where, in its 3 × 3 neighbourhood, some pixel's probe samples
+/// spread by more than `tol` or a probe mean differs from its own by more than `tol`. Elsewhere
+/// the image is flat to within `tol` at the probe's resolution and the probe mean stands. A
+/// feature narrower than a quarter pixel that touches no probe point within a pixel of it can
+/// be missed (a sliver of reflection along a bowl's rim, parallel to the probe's rows: on
+/// tabletop seed 7, 10 of 327,680 pixels differ from the full 8 × 8 grid, by ≤ 0.07 K; a 2 × 2
+/// probe missed 65). With `s ≤ 4` this is [`supersampled`].
+pub fn supersampled_adaptive(
+    camera: &PinholeCamera,
+    supersample: u32,
+    tol: f64,
+    value: impl Fn(f64, f64) -> f64 + Sync,
+) -> Image<f64> {
+    let s = supersample.max(1);
+    if s <= PROBE {
+        return supersampled(camera, s, value);
+    }
+    let (w, h) = (camera.width, camera.height);
+    let probe: Vec<(f64, f64, f64)> = (0..w * h)
+        .into_par_iter()
+        .map(|p| pixel_grid(p % w, p / w, PROBE, &value))
+        .collect();
+    let data = (0..w * h)
+        .into_par_iter()
         .map(|p| {
             let (col, row) = (p % w, p / w);
-            let mut sum = 0.0;
-            for a in 0..s {
-                for b in 0..s {
-                    let u = f64::from(col) + (f64::from(a) + 0.5) / f64::from(s);
-                    let v = f64::from(row) + (f64::from(b) + 0.5) / f64::from(s);
-                    sum += value(u, v);
-                }
+            let mean = probe[p as usize].0;
+            let varies = (row.saturating_sub(1)..(row + 2).min(h)).any(|r| {
+                (col.saturating_sub(1)..(col + 2).min(w)).any(|c| {
+                    let (m, lo, hi) = probe[(r * w + c) as usize];
+                    hi - lo > tol || (m - mean).abs() > tol
+                })
+            });
+            if varies {
+                pixel_grid(col, row, s, &value).0
+            } else {
+                mean
             }
-            sum / f64::from(s * s)
         })
         .collect();
     Image {
@@ -245,4 +304,66 @@ pub fn shaded_rgb(world: &World, camera: &PinholeCamera) -> image::RgbImage {
         px.into_iter().flatten().collect(),
     )
     .expect("sizes match")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    fn camera() -> PinholeCamera {
+        PinholeCamera::from_fov(40, 30, 0.9).expect("valid camera")
+    }
+
+    /// A small "reflection": a disc of radius 2.3 px with a 0.3-px-wide arm attached, over a
+    /// smooth ramp (a mirror's incidence-dependent radiance).
+    fn scene(u: f64, v: f64) -> f64 {
+        let (du, dv) = (u - 17.3, v - 13.6);
+        let disc = du * du + dv * dv < 2.3 * 2.3;
+        let arm = (0.0..6.0).contains(&du) && (dv - 0.4 * du - 1.1).abs() < 0.15;
+        let ramp = 1e-4 * u + 2e-5 * v;
+        ramp + if disc || arm { 1.0 } else { 0.0 }
+    }
+
+    #[test]
+    fn adaptive_matches_the_full_grid_within_tol_and_probes_flat_pixels() {
+        let cam = camera();
+        let tol = 1e-3;
+        let full = supersampled(&cam, 8, scene);
+        let probe = supersampled(&cam, PROBE, scene);
+        let calls = std::sync::atomic::AtomicUsize::new(0);
+        let adaptive = supersampled_adaptive(&cam, 8, tol, |u, v| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            scene(u, v)
+        });
+        let worst = |a: &Image<f64>| {
+            a.data
+                .iter()
+                .zip(&full.data)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(
+            worst(&adaptive) <= tol,
+            "adaptive off by {}",
+            worst(&adaptive)
+        );
+        // The probe's grid alone is far off at the edges and on the arm: the test can tell.
+        assert!(worst(&probe) > 0.05, "probe off by only {}", worst(&probe));
+        let n = calls.into_inner();
+        let pixels = (cam.width * cam.height) as usize;
+        let probes = pixels * (PROBE * PROBE) as usize;
+        assert!(
+            n < probes + pixels * 64 / 4,
+            "{n} samples for {pixels} pixels"
+        );
+        assert!(n > probes + 64 * 20, "{n} samples: too few pixels refined");
+    }
+
+    #[test]
+    fn adaptive_at_or_below_the_probe_is_the_plain_grid() {
+        let cam = camera();
+        for s in 1..=PROBE {
+            let a = supersampled_adaptive(&cam, s, 0.0, scene);
+            assert_eq!(a.data, supersampled(&cam, s, scene).data);
+        }
+    }
 }

@@ -10,7 +10,7 @@ use irmirror_body::BodyModel;
 use irmirror_capture::format::{
     CaptureFile, DepthSpec, ObjectSpec, RgbSpec, ThermalCameraSpec, ThermalSpec, ThermalUnits,
 };
-use irmirror_capture::planck::{ZERO_C_K, temperature_of};
+use irmirror_capture::planck::{ZERO_C_K, band_radiance, temperature_of};
 use irmirror_capture::{FORMAT, Image, write_gray8_png, write_gray16_png};
 use irmirror_geom::transform::RigidFile;
 use irmirror_geom::{Ray, Rigid3, Similarity3, TriMesh};
@@ -190,9 +190,13 @@ pub fn simulate(model: &BodyModel, scene: &SceneFile, seed: u64) -> Result<Simul
     let without = World::new(model, scene, None)?;
     let tcam = scene.thermal_camera.intrinsics;
     let s = &scene.sensor;
-    let rad_with = thermal_radiance(&with, &tcam, &depth_from_thermal, s.supersample);
-    let rad_without = thermal_radiance(&without, &tcam, &depth_from_thermal, s.supersample);
     let ambient_k = scene.ambient_c + ZERO_C_K;
+    // A pixel whose neighbourhood is flat to within a tenth of a millikelvin keeps the 4 × 4
+    // probe: far below any sensor's NETD, and it spares most of the car door's rays (6.8 s
+    // instead of 21.7 s for car seed 7).
+    let tol = 1e-4 * (band_radiance(ambient_k + 0.5) - band_radiance(ambient_k - 0.5));
+    let rad_with = thermal_radiance(&with, &tcam, &depth_from_thermal, s.supersample, tol);
+    let rad_without = thermal_radiance(&without, &tcam, &depth_from_thermal, s.supersample, tol);
     let mut rng = irmirror_geom::rng::seeded(seed, 1);
     let thermal = thermal_counts(&rad_with, s, ambient_k, &mut rng);
     let mut rng_bg = irmirror_geom::rng::seeded(seed, 2);

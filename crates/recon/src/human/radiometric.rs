@@ -9,11 +9,12 @@
 //! ŷ_p = g_k(p) · Σ_i W_pi · o_i · c_r(i),    c_r = ε_r (B(T_r) − B(T_amb)) / B'(T_amb)
 //! ```
 //!
-//! `W` the observation operator: each pixel is sampled by 4 rays (the box's 2 × 2
-//! Gauss–Legendre nodes, `pipeline::FOOTPRINT_OFFSETS`; a node that misses the objects shows
-//! the room) and their mean is convolved with the capture's Gaussian point spread
-//! (`thermal_camera.psf_sigma_px`), so a pixel half covered rises half as much and a thin
-//! limb spreads into its neighbours (reflections over `footprint_max_mask_px`: one ray per
+//! `W` the observation operator: each pixel is sampled by `n × n` rays (the box's midpoint
+//! grid, 2 × 2 to 4 × 4 as `footprint_max_rays` allows, `pipeline::footprint_offsets`; a
+//! node that misses the objects shows the room) and their mean is convolved with the
+//! capture's Gaussian point spread (`thermal_camera.psf_sigma_px`), so a pixel half covered
+//! rises half as much and a thin limb spreads into its neighbours (reflections over
+//! `footprint_max_mask_px`: one ray per
 //! pixel, `W` = 1). `g_k` the LWIR reflectance (1 − emissivity) of the object under most of
 //! the pixel's weight, `T_r` the region's surface temperature (face, hair, bare skin,
 //! clothing: `irmirror_body::regions`), `ε_r` its emissivity, `B` the band radiance and `T_amb` the
@@ -124,13 +125,20 @@ pub struct RadiometricConfig {
     /// 42,657 rays made the polish of two hypotheses about 6 s (tuning bowls, 8,000 against
     /// every ray: fits' data term median 0.177 / 0.170, per-vertex 0.30 / 0.30 m).
     pub polish_rays: usize,
-    /// Integrate each pixel's footprint (4 rays through the pixel's box, their mean convolved
-    /// with the capture's point spread; [`crate::pipeline::FOOTPRINT_OFFSETS`]) rather than
-    /// one ray at its centre, when the reflection mask has at most this many pixels (0: never).
-    /// A pixel half covered by the reflection rises half as much: on a 20-pixel reflection
-    /// the edges are most of what the image says, on a 4,000-pixel one a few per cent, for 4×
-    /// the rays (a car door's 150,000 object pixels would take 1 GB).
+    /// Integrate each pixel's footprint (`n × n` rays through the pixel's box, their mean
+    /// convolved with the capture's point spread; [`crate::pipeline::footprint_offsets`])
+    /// rather than one ray at its centre, when the reflection mask has at most this many pixels
+    /// (0: never). A pixel half covered by the reflection rises half as much: on a 20-pixel
+    /// reflection the edges are most of what the image says, on a 4,000-pixel one a few per
+    /// cent, for n² times the rays (a car door's 150,000 object pixels at 2 × 2 would take
+    /// 1 GB).
     pub footprint_max_mask_px: usize,
+    /// Rays the footprint may take: its grid is the finest `n × n` (2 ≤ n ≤ 4) whose rays over
+    /// every pixel near an object stay within this (2 × 2 when none does). A 160 × 120 tabletop
+    /// (≈ 3,000 such pixels) gets 4 × 4, a 160 × 120 car door (≈ 16,000) 3 × 3, a 640 × 512
+    /// tabletop (≈ 45,000) 2 × 2 — the rays it had before, so stage 2's memory stays where it
+    /// was: a half-covered pixel matters most where the reflection is a few pixels.
+    pub footprint_max_rays: usize,
     /// The person's surface temperature per region when known (°C; clothing, bare skin, face,
     /// hair: `Region::ALL`'s order): the common offset is fitted about these instead of the
     /// cited ranges' centres. `eval --variants true-radiometry` gives the simulator's (an
@@ -156,6 +164,7 @@ impl Default for RadiometricConfig {
             polish_lr_scale: 0.25,
             polish_rays: 8000,
             footprint_max_mask_px: 1000,
+            footprint_max_rays: 200_000,
             region_temperatures_c: None,
         }
     }

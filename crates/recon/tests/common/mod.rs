@@ -91,7 +91,14 @@ fn true_rays(
         irmirror_render::reflect::Normals::Raw,
     );
     let all = if footprint {
-        irmirror_recon::pipeline::footprint_rays(cam, &dft, &objs, &trace, normals)
+        irmirror_recon::pipeline::footprint_rays(
+            cam,
+            &dft,
+            &objs,
+            &trace,
+            normals,
+            irmirror_recon::human::radiometric::RadiometricConfig::default().footprint_max_rays,
+        )
     } else {
         irmirror_render::reflect::reflect_camera(cam, &dft, &objs, &trace, normals)
     };
