@@ -14,11 +14,10 @@
 //! node that misses the objects shows the room) and their mean is convolved with the
 //! capture's Gaussian point spread (`thermal_camera.psf_sigma_px`), so a pixel half covered
 //! rises half as much and a thin limb spreads into its neighbours (reflections over
-//! `footprint_max_mask_px`: one ray per
-//! pixel, `W` = 1). `g_k` the LWIR reflectance (1 − emissivity) of the object under most of
-//! the pixel's weight, `T_r` the region's surface temperature (face, hair, bare skin,
-//! clothing: `irmirror_body::regions`), `ε_r` its emissivity, `B` the band radiance and `T_amb` the
-//! room the mirror shows without the person (the background frames' median apparent
+//! `footprint_max_mask_px`: one ray per pixel, `W` = 1). `g_k` the LWIR reflectance
+//! (1 − emissivity) of the object under most of the pixel's weight, `T_r` the region's surface
+//! temperature (face, hair, bare skin, clothing: `irmirror_body::regions`), `ε_r` its
+//! emissivity, `B` the band radiance and `T_amb` the room the mirror shows without the person (the background frames' median apparent
 //! temperature on the objects). The rise is linear in radiance, so dividing by `B'` turns
 //! radiance into apparent kelvin to first order (≤ 2 % over a 1 K rise).
 //!
