@@ -185,7 +185,9 @@ fn without_background_frames_stage_2_fits_the_mask_and_says_why() {
 
 /// The search's thermal batch (used when the rounds rank on the rise) draws whole pixels of
 /// the observation operator: the pixels' importance weights add up to all pixels, every ray a
-/// drawn pixel needs comes along once, and each ray carries a weight.
+/// drawn pixel needs comes along once, and each ray carries a weight. A sample whose pixels
+/// would need more than half of all rays (the point spread pulls in their neighbours') takes
+/// every pixel at weight 1 instead; any other holds at most half of them.
 #[test]
 fn thermal_stratified_batch_draws_whole_pixels() {
     use irmirror_recon::human::radiometric::Radiometry;
@@ -218,6 +220,33 @@ fn thermal_stratified_batch_draws_whole_pixels() {
     let rise = sel.rise(Some(weight));
     assert_eq!(rise.rise_k.len(), weight.len());
     assert!(rise.entries.iter().all(|e| (e.0 as usize) < sel.rays.len()));
+    let (mut whole_below_half, mut sampled) = (false, false);
+    for n in [1200, rays.len() / 8, rays.len() / 2, rays.len()] {
+        let s = problem.stratified_batch(n, 3, true);
+        let (_, weight) = s.rise.as_ref().unwrap();
+        eprintln!(
+            "{n} rays asked: {} of {} pixels, {} of {} rays, complete {}",
+            weight.len(),
+            rad.pixels(),
+            s.rays.len(),
+            rays.len(),
+            s.complete
+        );
+        if s.complete {
+            assert_eq!(weight.len(), rad.pixels());
+            assert!(weight.iter().chain(&s.weight).all(|&w| w == 1.0));
+            whole_below_half |= 2 * n < rays.len();
+        } else {
+            assert!(
+                2 * s.rays.len() <= rays.len(),
+                "{} of {}",
+                s.rays.len(),
+                rays.len()
+            );
+            sampled = true;
+        }
+    }
+    assert!(sampled && whole_below_half, "both kinds of batch seen");
 }
 
 /// The mask's search batch on footprint rays (4 per pixel) takes one ray per pixel: the
@@ -289,11 +318,12 @@ fn the_thermal_polish_takes_the_best_and_its_partner() {
     assert!(some.iter().any(|&n| n < long), "{some:?}");
 }
 
-/// The rise pass (forced on by its threshold): twice the candidates, and the reported
-/// hypothesis first faces the mask search winner's way (within 90°) when any does (that
-/// search alone with the threshold at 0: the same seed gives the same first pass); with its
-/// guard at a micrometre, the mask pass's hypotheses. Car seed 2: there the rise pass's states
-/// win unguarded (on seeds 1 and 3 the mask pass's own states win, so the guard is not seen).
+/// The rise pass (forced on by its threshold): twice the candidates; its best by loss
+/// reported first (by default), or with `rise_pass_side` its best facing the mask search
+/// winner's way (within 90°) when any does (that search alone with the threshold at 0: the
+/// same seed gives the same first pass); with its guard at a micrometre, the mask pass's
+/// hypotheses. Car seed 2: there the rise pass's states win unguarded (on seeds 1 and 3 the
+/// mask pass's own states win, so the guard is not seen).
 #[test]
 fn the_rise_pass_reports_the_facing_the_mask_search_chose() {
     use irmirror_geom::rotation::axis_angle_to_matrix;
@@ -307,7 +337,19 @@ fn the_rise_pass_reports_the_facing_the_mask_search_chose() {
     let (mask, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
     cfg.radiometric.rise_pass_max_mask_px = usize::MAX;
     assert!(problem.rise_pass(&cfg).is_some());
+    // By default the first is the lowest (the parts no ray sees are reset after the ranking,
+    // which moves a loss by at most the reset's tolerance).
+    let (free, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
+    let lowest = free
+        .hypotheses
+        .iter()
+        .map(|h| h.loss)
+        .fold(f64::INFINITY, f64::min);
+    let losses: Vec<f64> = free.hypotheses.iter().map(|h| h.loss).collect();
+    assert!(losses[0] <= lowest + cfg.unseen_tolerance, "{losses:?}");
+    cfg.radiometric.rise_pass_side = true;
     let (both, _) = fit_human(&problem, &cfg, 0, &|_| {}).unwrap();
+    assert_eq!(both.candidates, free.candidates);
     assert_eq!(both.candidates, 2 * mask.candidates);
     let rot = |h: &Hypothesis| axis_angle_to_matrix(&h.root_rotvec_rad.into());
     let lead = rot(&mask.hypotheses[0]);

@@ -108,6 +108,12 @@ pub struct RadiometricConfig {
     /// the mask search's winner (m; 0: always; default 0.5): the mask's search finds the
     /// basin, the rise places the person in it.
     pub rise_pass_max_move_m: f64,
+    /// The rise pass reports first its best hypothesis on the mask search winner's side
+    /// (facing within 90° of it) rather than its best by loss: the mask's search with its
+    /// polish chose front or back. Off (default): on the held-out hard view, with the rise on
+    /// a 4 × 4 footprint of a simulator that integrates each pixel, the rise's own best faced
+    /// right more often (EXPERIMENTS.md, "Forty-eighth run").
+    pub rise_pass_side: bool,
     /// Refined hypotheses that take the polish: the best this many by the rise before it, and
     /// the best one's front/back partner (the pair the rise is there to tell apart); the others
     /// are ranked on the rise as they stand. 0: every hypothesis.
@@ -159,6 +165,7 @@ impl Default for RadiometricConfig {
             polish_iterations: 40,
             rise_pass_max_mask_px: 50,
             rise_pass_max_move_m: 0.5,
+            rise_pass_side: false,
             polish_best: 1,
             polish_lr_scale: 0.25,
             polish_rays: 8000,
