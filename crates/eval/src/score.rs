@@ -58,7 +58,8 @@ pub struct FigureRow {
 
 impl Evaluation {
     /// The figures in words, in a fixed order, each with its yardstick. The benchmark medians
-    /// quoted are the README's held-out `irmirror eval --preset quick` (2026-11-30).
+    /// quoted are the README's held-out `irmirror eval --preset full` (24 captures a cell, the
+    /// hard view 60; 2026-12-07, session 86).
     pub fn rows(&self) -> Vec<FigureRow> {
         let opt = |x: Option<f64>, unit: &str, digits: usize| {
             x.map_or("n/a".to_string(), |v| format!("{v:.digits$}{unit}"))
@@ -83,7 +84,7 @@ impl Evaluation {
                     100.0 * self.root_error_m / self.person_distance_m.max(1e-9),
                     self.person_distance_m
                 ),
-                yardstick: "goal ≤ 0.10 m tabletop, ≤ 5 % car; benchmark median 0.14 m bowls, 0.16 m mugs, 0.15 m car, 0.23 m wide",
+                yardstick: "goal ≤ 0.10 m tabletop, ≤ 5 % car; benchmark median 0.15 m bowls, 0.15 m mugs, 0.16 m car, 0.14 m wide",
             },
             FigureRow {
                 name: "2-D keypoints, evaluation camera (normalised)",
@@ -108,7 +109,7 @@ impl Evaluation {
             FigureRow {
                 name: "mean per-vertex error",
                 value: opt(self.vertex_error_m, " m", 3),
-                yardstick: "goal ≤ 0.12 m; random pose at the true root and facing ≈ 0.26 m; benchmark median 0.31 bowls, 0.53 mugs, 0.43 car, 0.45 wide",
+                yardstick: "goal ≤ 0.12 m; random pose at the true root and facing ≈ 0.26 m; benchmark median 0.35 bowls, 0.51 mugs, 0.30 car, 0.26 wide",
             },
             FigureRow {
                 name: "facing error",

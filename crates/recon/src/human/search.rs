@@ -600,8 +600,9 @@ fn ranked(
 /// Fits the person: global search, every survivor refined in parallel, best first, its
 /// front/back partner next, distinct top-k. On a small reflection
 /// ([`HumanProblem::rise_pass`]) a second search fits the rise throughout and its hypotheses
-/// are reported, its best first ([`super::radiometric::RadiometricConfig::rise_pass_side`]: its best on the first
-/// search's winner's side).
+/// are reported, its best first (with
+/// [`super::radiometric::RadiometricConfig::rise_pass_side`], its best on the first search's
+/// winner's side).
 pub fn fit_human(
     problem: &HumanProblem<'_>,
     cfg: &HumanConfig,
