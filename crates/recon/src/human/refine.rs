@@ -114,27 +114,25 @@ impl HumanProblem<'_> {
         chosen.extend(pick(&neg, n_neg));
         chosen.sort_unstable_by_key(|c| c.0);
         let mut complete = n_pos == pos.len() && n_neg == neg.len();
+        let mut picked: Vec<usize> = chosen.iter().map(|c| c.0).collect();
+        let mut unit_weight: Vec<f64> = chosen.iter().map(|c| c.1).collect();
         let mut selection = Selection::default();
-        if let Some(r) = rad.filter(|_| !complete) {
-            // A pixel's prediction needs its footprint's rays and, through the point spread,
-            // its neighbours': where a sample of the pixels already needs more than half of
-            // all rays (a small capture's 4 × 4 footprint: 154 of 958 pixels took 5,611 of
-            // 7,511 rays), every pixel costs little more and ranks on all the image says
-            // (held-out hard view, root median 0.173 → 0.144 m: EXPERIMENTS.md, "Forty-eighth
-            // run").
-            let picked: Vec<usize> = chosen.iter().map(|c| c.0).collect();
-            r.select(&picked, &mut selection);
-            if 2 * selection.rays.len() > self.rays.len() {
-                chosen = pos.iter().chain(&neg).map(|&u| (u, 1.0)).collect();
-                chosen.sort_unstable_by_key(|c| c.0);
-                complete = true;
-            }
-        }
-        let picked: Vec<usize> = chosen.iter().map(|c| c.0).collect();
-        let unit_weight: Vec<f64> = chosen.iter().map(|c| c.1).collect();
         let (idx, weight) = match rad {
             Some(r) => {
                 r.select(&picked, &mut selection);
+                // A pixel's prediction needs its footprint's rays and, through the point
+                // spread, its neighbours': where a sample of the pixels already needs more than
+                // half of all rays (a small capture's 4 × 4 footprint: 154 of 958 pixels took
+                // 5,611 of 7,511 rays), every pixel costs little more and ranks on all the
+                // image says (held-out hard view, root median 0.173 → 0.144 m: EXPERIMENTS.md,
+                // "Forty-eighth run").
+                if !complete && 2 * selection.rays.len() > self.rays.len() {
+                    picked = pos.iter().chain(&neg).copied().collect();
+                    picked.sort_unstable();
+                    unit_weight = vec![1.0; picked.len()];
+                    complete = true;
+                    r.select(&picked, &mut selection);
+                }
                 // A ray weighs what the first pixel that needs it does.
                 let w = selection
                     .owner
@@ -343,5 +341,37 @@ impl Stratified {
             rise: self.rise.as_ref().map(|(sel, w)| sel.rise(Some(w))),
             sigma_m2,
         }
+    }
+}
+
+/// Which of the rise pass's hypotheses (best first) is reported first, given each one's facing
+/// angle from the mask search's winner (degrees): its best, or with `side` its best on the
+/// winner's side (within 90°; none there: the one facing nearest it) — the mask's search with
+/// its polish chose front or back, not the exact facing (the state facing nearest it, whatever
+/// its loss, left the tuning hard view's roots 0.170 m off, median, against 0.117 for the best
+/// on its side). Off by default since the simulator integrates each pixel's box and the rise
+/// its 4 × 4 footprint: on the held-out hard view the rise's own best faced right more often
+/// (EXPERIMENTS.md, "Forty-eighth run").
+pub(super) fn rise_pass_first(off_deg: &[f64], side: bool) -> Option<usize> {
+    if !side {
+        return (!off_deg.is_empty()).then_some(0);
+    }
+    (0..off_deg.len())
+        .find(|&k| off_deg[k] < 90.0)
+        .or_else(|| (0..off_deg.len()).min_by(|&i, &j| off_deg[i].total_cmp(&off_deg[j])))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rise_pass_reports_its_best_or_its_best_on_the_winners_side() {
+        let off = [150.0, 100.0, 40.0, 10.0];
+        assert_eq!(rise_pass_first(&off, false), Some(0));
+        assert_eq!(rise_pass_first(&off, true), Some(2));
+        assert_eq!(rise_pass_first(&[150.0, 100.0, 170.0], true), Some(1));
+        assert_eq!(rise_pass_first(&[], true), None);
+        assert_eq!(rise_pass_first(&[], false), None);
     }
 }

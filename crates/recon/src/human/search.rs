@@ -623,7 +623,7 @@ pub fn fit_human(
             .iter()
             .map(|(_, st)| facing_angle_deg(&up, &st.rotation, &lead))
             .collect();
-        let first = rise_pass_first(&off, cfg.radiometric.rise_pass_side);
+        let first = super::refine::rise_pass_first(&off, cfg.radiometric.rise_pass_side);
         let moved = |j: usize| (rise[j].1.translation - lead_root).norm();
         let max_move = cfg.radiometric.rise_pass_max_move_m;
         if let Some(j) = first.filter(|&j| max_move <= 0.0 || moved(j) <= max_move) {
@@ -695,23 +695,6 @@ pub fn fit_human(
     ))
 }
 
-/// Which of the rise pass's hypotheses (best first) is reported first, given each one's facing
-/// angle from the mask search's winner (degrees): its best, or with `side` its best on the
-/// winner's side (within 90°; none there: the one facing nearest it) — the mask's search with
-/// its polish chose front or back, not the exact facing (the state facing nearest it, whatever
-/// its loss, left the tuning hard view's roots 0.170 m off, median, against 0.117 for the best
-/// on its side). Off by default since the simulator integrates each pixel's box and the rise
-/// its 4 × 4 footprint: on the held-out hard view the rise's own best faced right more often
-/// (EXPERIMENTS.md, "Forty-eighth run").
-fn rise_pass_first(off_deg: &[f64], side: bool) -> Option<usize> {
-    if !side {
-        return (!off_deg.is_empty()).then_some(0);
-    }
-    (0..off_deg.len())
-        .find(|&k| off_deg[k] < 90.0)
-        .or_else(|| (0..off_deg.len()).min_by(|&i, &j| off_deg[i].total_cmp(&off_deg[j])))
-}
-
 /// The reported hypothesis of a refined state `st` from start `init`, evaluated on all rays.
 fn hypothesis(
     problem: &HumanProblem<'_>,
@@ -760,16 +743,6 @@ mod tests {
 
     /// The yaw polish takes its hypotheses where the refinement draws fresh batches, and on a
     /// fixed batch only when asked to.
-    #[test]
-    fn the_rise_pass_reports_its_best_or_its_best_on_the_winners_side() {
-        let off = [150.0, 100.0, 40.0, 10.0];
-        assert_eq!(rise_pass_first(&off, false), Some(0));
-        assert_eq!(rise_pass_first(&off, true), Some(2));
-        assert_eq!(rise_pass_first(&[150.0, 100.0, 170.0], true), Some(1));
-        assert_eq!(rise_pass_first(&[], true), None);
-        assert_eq!(rise_pass_first(&[], false), None);
-    }
-
     #[test]
     fn the_yaw_polish_skips_a_fixed_batch_unless_asked() {
         let mut s = SearchConfig::default();
