@@ -261,7 +261,7 @@ pub fn reflected_rays_through(
             placed,
             &trace,
             normals,
-            hcfg.radiometric.footprint_max_rays,
+            FootprintBudget::new(&hcfg.radiometric, mask_px),
         );
         return unblocked(&rays, placed, plane, &trace);
     }
@@ -294,6 +294,29 @@ pub fn reflected_rays_through(
 /// Most nodes per axis of a pixel's footprint grid ([`footprint_offsets`]).
 pub const FOOTPRINT_MAX_NODES: u32 = 4;
 
+/// How finely [`footprint_rays`] samples each pixel: the finest `n × n` grid, 2 ≤ n ≤
+/// `max_nodes`, whose rays fit `max_rays` (2 × 2 when none does).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FootprintBudget {
+    /// Most nodes per axis (at most [`FOOTPRINT_MAX_NODES`]).
+    pub max_nodes: u32,
+    /// Most rays over every pixel near an object.
+    pub max_rays: usize,
+}
+
+impl FootprintBudget {
+    /// The budget `cfg` gives a reflection mask of `mask_px` pixels
+    /// (`footprint_fine_max_mask_px`, `footprint_max_rays`).
+    pub fn new(cfg: &crate::human::radiometric::RadiometricConfig, mask_px: usize) -> Self {
+        let max_px = cfg.footprint_fine_max_mask_px;
+        let fine = max_px == 0 || mask_px <= max_px;
+        Self {
+            max_nodes: if fine { FOOTPRINT_MAX_NODES } else { 2 },
+            max_rays: cfg.footprint_max_rays,
+        }
+    }
+}
+
 /// Where a pixel's box is sampled, pixels from its centre: the `n × n` midpoint grid
 /// (`(i + ½)/n − ½`), x fastest. A reflection's edge crosses a pixel as a step, which a midpoint
 /// grid integrates to `1/n²` of the pixel; against a simulator that integrates the box by 8 × 8
@@ -309,17 +332,16 @@ pub fn footprint_offsets(n: u32) -> Vec<(f64, f64)> {
 }
 
 /// Every thermal pixel within reach of an object (a centre ray hits one in its 3 × 3
-/// neighbourhood) sampled at the finest [`footprint_offsets`] grid (2 × 2 up to
-/// [`FOOTPRINT_MAX_NODES`]²) whose rays stay within `max_rays`, reflected; a pixel's rays lie
-/// next to each other in pixel order, and a node that misses every object has none (it counts
-/// as showing the room).
+/// neighbourhood) sampled at the finest [`footprint_offsets`] grid `budget` allows, reflected;
+/// a pixel's rays lie next to each other in pixel order, and a node that misses every object
+/// has none (it counts as showing the room).
 pub fn footprint_rays(
     cam: &PinholeCamera,
     depth_from_camera: &Rigid3<f64>,
     placed: &[irmirror_render::sdf::PlacedSdf],
     trace: &TraceParams,
     normals: Normals,
-    max_rays: usize,
+    budget: FootprintBudget,
 ) -> ReflectedRays<f64> {
     let centres = reflect_camera(cam, depth_from_camera, placed, trace, normals);
     let (w, h) = (cam.width as i64, cam.height as i64);
@@ -334,9 +356,9 @@ pub fn footprint_rays(
         }
     }
     let reachable = near.iter().filter(|&&n| n).count();
-    let nodes = (2..=FOOTPRINT_MAX_NODES)
+    let nodes = (2..=budget.max_nodes.min(FOOTPRINT_MAX_NODES))
         .rev()
-        .find(|&n| (n * n) as usize * reachable <= max_rays)
+        .find(|&n| (n * n) as usize * reachable <= budget.max_rays)
         .unwrap_or(2);
     let offsets = footprint_offsets(nodes);
     let mut all = ReflectedRays {
@@ -492,7 +514,26 @@ pub fn reconstruct_human(
 
 #[cfg(test)]
 mod tests {
-    use super::footprint_offsets;
+    use super::{FOOTPRINT_MAX_NODES, FootprintBudget, footprint_offsets};
+
+    /// Grids finer than 2 × 2 only on a reflection of at most `footprint_fine_max_mask_px`
+    /// (0: on any).
+    #[test]
+    fn footprint_budget_is_fine_on_small_reflections_only() {
+        let mut cfg = crate::human::radiometric::RadiometricConfig {
+            footprint_fine_max_mask_px: 0,
+            ..Default::default()
+        };
+        let at = |cfg: &_, px| FootprintBudget::new(cfg, px).max_nodes;
+        assert_eq!(at(&cfg, 100_000), FOOTPRINT_MAX_NODES);
+        cfg.footprint_fine_max_mask_px = 50;
+        assert_eq!(at(&cfg, 50), FOOTPRINT_MAX_NODES);
+        assert_eq!(at(&cfg, 51), 2);
+        assert_eq!(
+            FootprintBudget::new(&cfg, 0).max_rays,
+            cfg.footprint_max_rays
+        );
+    }
 
     /// The midpoint grid: n² nodes inside the box, centred, and a step edge at any multiple of
     /// 1/n covers exactly its share of them (what a half-covered pixel's rise relies on).

@@ -135,9 +135,20 @@ fn the_retrieval_finds_a_held_pose() {
         );
         // Measured: 17.2° → 0.0°, 0.367 → 0.000 m (the kick itself).
         assert!(after.0 < 1.0 && after.1 < 0.01, "{before:?} → {after:?}");
-        let cands = problem.retrieval_candidates(start, &cfg).unwrap();
+        let cands = problem
+            .retrieval_candidates(start, &cfg, usize::MAX)
+            .unwrap();
         assert!(cands.len() > 700, "{} candidates", cands.len());
         assert!(cands.windows(2).all(|w| w[0].1 <= w[1].1), "not sorted");
+        // The best few, whose poses are cut as soon as they cannot be among them, are the
+        // full ranking's first, bit for bit.
+        let few = problem.retrieval_candidates(start, &cfg, 10).unwrap();
+        assert_eq!(few.len(), 10);
+        for (a, b) in few.iter().zip(&cands) {
+            assert_eq!(a.1.to_bits(), b.1.to_bits());
+            assert_eq!(a.0.latent, b.0.latent);
+            assert_eq!(a.0.translation, b.0.translation);
+        }
         let first = posed_body(model(), prior(), &end).unwrap();
         let own = problem
             .retrieval_score_at(&end.translation, &first.vertices, &cfg)

@@ -232,8 +232,10 @@ fn random_byte_flips_never_panic() {
 /// true person scored "nobody there".
 #[test]
 fn a_reflection_past_the_tables_edge_keeps_its_rays() {
+    use irmirror_recon::pipeline::{
+        FootprintBudget, ReconConfig, footprint_rays, reflected_rays, unblocked,
+    };
     use irmirror_recon::pipeline::{PlaneOccluder, SeenPlane};
-    use irmirror_recon::pipeline::{ReconConfig, footprint_rays, reflected_rays, unblocked};
     use irmirror_sim::presets::{Cell, Shapes, benchmark_scene};
     let (scene, _) =
         benchmark_scene(model(), Cell::TabletopMug, Shapes::Simple, 21000, 30.0, 0).unwrap();
@@ -262,7 +264,7 @@ fn a_reflection_past_the_tables_edge_keeps_its_rays() {
         &placed,
         &trace,
         normals,
-        cfg.human_settings().radiometric.footprint_max_rays,
+        FootprintBudget::new(&cfg.human_settings().radiometric, mask_px),
     );
     let blind = PlaneOccluder {
         plane: &plane,

@@ -139,11 +139,15 @@ pub struct RadiometricConfig {
     /// 1 GB).
     pub footprint_max_mask_px: usize,
     /// Rays the footprint may take: its grid is the finest `n × n` (2 ≤ n ≤ 4) whose rays over
-    /// every pixel near an object stay within this (2 × 2 when none does). A 160 × 120 tabletop
-    /// (≈ 3,000 such pixels) gets 4 × 4, a 160 × 120 car door (≈ 16,000) 3 × 3, a 640 × 512
-    /// tabletop (≈ 45,000) 2 × 2 — the rays it had before, so stage 2's memory stays where it
-    /// was: a half-covered pixel matters most where the reflection is a few pixels.
+    /// every pixel near an object stay within this (2 × 2 when none does): a 160 × 120
+    /// tabletop (≈ 3,000 such pixels) gets 4 × 4, a 160 × 120 car door (≈ 16,000) 3 × 3.
     pub footprint_max_rays: usize,
+    /// Grids finer than 2 × 2 only on a reflection mask of at most this many pixels (0: on
+    /// any). Boson tabletops with < 12,500 pixels near the objects (half of them) get 4 × 4;
+    /// at 50 (2 × 2 but for the hard view's 10–50 pixels) such a frame takes ≈ 0.8× as long,
+    /// 48 held-out mugs were level and 48 bowls leaned worse (per-vertex +0.018 ± 0.027 m, 2-D
+    /// +0.018 ± 0.026; EXPERIMENTS.md, "Fiftieth run"): off by default.
+    pub footprint_fine_max_mask_px: usize,
     /// The person's surface temperature per region when known (°C; clothing, bare skin, face,
     /// hair: `Region::ALL`'s order): the common offset is fitted about these instead of the
     /// cited ranges' centres. `eval --variants true-radiometry` gives the simulator's (an
@@ -171,6 +175,7 @@ impl Default for RadiometricConfig {
             polish_rays: 8000,
             footprint_max_mask_px: 1000,
             footprint_max_rays: 200_000,
+            footprint_fine_max_mask_px: 0,
             region_temperatures_c: None,
         }
     }

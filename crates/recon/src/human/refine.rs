@@ -143,6 +143,14 @@ impl HumanProblem<'_> {
             }
             None => (picked, unit_weight.clone()),
         };
+        // What a batch costs: a thermal pixel needs its footprint's and its neighbours' rays.
+        tracing::debug!(
+            "fixed batch: {} units{} ({n_pos} of the mask, {n_neg} others drawn), {} of {} rays",
+            unit_weight.len(),
+            if complete { ", every one" } else { "" },
+            idx.len(),
+            self.rays.len()
+        );
         let mut rays = ReflectedRays::default();
         self.rays.select_into(&idx, &mut rays);
         Stratified {

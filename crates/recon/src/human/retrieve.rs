@@ -410,6 +410,22 @@ impl HumanProblem<'_> {
         view: &View,
         cfg: &RetrievalConfig,
     ) -> (f64, (i32, i32)) {
+        self.view_score_below(vertices, view, cfg, f64::INFINITY)
+            .unwrap_or((f64::INFINITY, (0, 0)))
+    }
+
+    /// [`Self::view_score`] where it may lie below `bound`, `None` where it surely does not: a
+    /// retrieval of the best few cuts a pose as soon as it cannot be among them, and most of a
+    /// bank's poses fail the bound within a shift's first sums (the terms are ≥ 0, so a partial
+    /// sum above it settles the shift; the sums that finish are added in the same order, so
+    /// the score is the same bit for bit).
+    fn view_score_below(
+        &self,
+        vertices: &[Vector3<f64>],
+        view: &View,
+        cfg: &RetrievalConfig,
+        bound: f64,
+    ) -> Option<(f64, (i32, i32))> {
         let n = side(cfg);
         let step = ((cfg.shift_step_m / cfg.cell_m).round() as i32).max(1);
         let reach = (cfg.shift_m / cfg.cell_m / f64::from(step)).round() as i32;
@@ -424,26 +440,38 @@ impl HumanProblem<'_> {
             .copied()
             .filter(|&(x, y)| dist.out.near(x, y, r))
             .collect();
-        let mut best = (f64::INFINITY, (0, 0));
+        // The bound in the sums' units, a hair loose: a score within rounding of it is
+        // finished, and the caller's own comparison decides.
+        let scale = view.mask.len() as f64 / cfg.cell_m;
+        let mut best = (bound.max(0.0) * scale * (1.0 + 1e-9) + 1e-300, None);
         for du in (-reach..=reach).map(|k| k * step) {
             for dv in (-reach..=reach).map(|k| k * step) {
                 // The window lies on the raster: off it, no body is there.
-                let miss: f64 = view
-                    .mask
-                    .iter()
-                    .map(|&(x, y)| dist.to_sil(x + du, y + dv))
-                    .sum();
+                let mut miss = 0.0;
+                for &(x, y) in &view.mask {
+                    miss += dist.to_sil(x + du, y + dv);
+                    if miss > best.0 {
+                        break;
+                    }
+                }
                 if miss >= best.0 {
                     // The spill is ≥ 0: this shift cannot win.
                     continue;
                 }
-                let spill: f64 = near.iter().map(|&(x, y)| dist.to_out(x + du, y + dv)).sum();
+                let mut spill = 0.0;
+                for &(x, y) in &near {
+                    spill += dist.to_out(x + du, y + dv);
+                    if miss + spill >= best.0 {
+                        break;
+                    }
+                }
                 if miss + spill < best.0 {
-                    best = (miss + spill, (du, dv));
+                    best = (miss + spill, Some((du, dv)));
                 }
             }
         }
-        (best.0 * cfg.cell_m / view.mask.len() as f64, best.1)
+        best.1
+            .map(|shift| (best.0 * cfg.cell_m / view.mask.len() as f64, shift))
     }
 
     /// `st` tried in every pose of `bank` (its root and facing kept, the feet moved to the
@@ -483,7 +511,11 @@ impl HumanProblem<'_> {
                 self.model.pose_surface_into(&shaped, &pose, body)?;
                 let mut score = 0.0;
                 for view in &views {
-                    score += self.view_score(&body.vertices, view, cfg).0;
+                    let cut = f64::from_bits(bar.load(AtomicOrdering::Relaxed));
+                    match self.view_score_below(&body.vertices, view, cfg, cut - score) {
+                        Some((s, _)) => score += s,
+                        None => return Ok(()),
+                    }
                     if score > f64::from_bits(bar.load(AtomicOrdering::Relaxed)) {
                         return Ok(());
                     }
@@ -539,14 +571,16 @@ impl HumanProblem<'_> {
     }
 
     /// `st` in every source pose ([`Self::source_poses`], its feet on the floor when known),
-    /// with its retrieval score, best first; empty when no view sees the mask.
+    /// with its retrieval score, best first, the best `keep` of them (all: `usize::MAX`);
+    /// empty when no view sees the mask.
     pub fn retrieval_candidates(
         &self,
         st: &HumanState,
         cfg: &RetrievalConfig,
+        keep: usize,
     ) -> Result<Vec<(HumanState, f64)>, ReconError> {
         let bank = self.pose_bank(usize::MAX, st.height)?;
-        self.candidates_in(st, &bank, cfg, usize::MAX)
+        self.candidates_in(st, &bank, cfg, keep)
     }
 
     /// [`Self::retrieval_candidates`] among the poses of `bank`, the best `keep` of them.
@@ -571,7 +605,7 @@ impl HumanProblem<'_> {
         st: &HumanState,
         cfg: &RetrievalConfig,
     ) -> Result<HumanState, ReconError> {
-        let cands = self.retrieval_candidates(st, cfg)?;
+        let cands = self.retrieval_candidates(st, cfg, cfg.mean_of.max(1))?;
         Ok(mean_state(st, &cands, cfg.mean_of))
     }
 

@@ -97,7 +97,7 @@ fn true_rays(
             &objs,
             &trace,
             normals,
-            irmirror_recon::human::radiometric::RadiometricConfig::default().footprint_max_rays,
+            irmirror_recon::pipeline::FootprintBudget::new(&Default::default(), 0),
         )
     } else {
         irmirror_render::reflect::reflect_camera(cam, &dft, &objs, &trace, normals)
