@@ -143,7 +143,7 @@ pub struct RadiometricConfig {
     /// tabletop (≈ 3,000 such pixels) gets 4 × 4, a 160 × 120 car door (≈ 16,000) 3 × 3.
     pub footprint_max_rays: usize,
     /// Grids finer than 2 × 2 only on a reflection mask of at most this many pixels (0: on
-    /// any). Boson tabletops with < 12,500 pixels near the objects (half of them) get 4 × 4;
+    /// any). Boson tabletops with few pixels near the objects (half of them) get 3 × 3 or 4 × 4;
     /// at 50 (2 × 2 but for the hard view's 10–50 pixels) such a frame takes ≈ 0.8× as long,
     /// 48 held-out mugs were level and 48 bowls leaned worse (per-vertex +0.018 ± 0.027 m, 2-D
     /// +0.018 ± 0.026; EXPERIMENTS.md, "Fiftieth run"): off by default.
