@@ -684,3 +684,29 @@ fn exact_truth(
         latent,
     }
 }
+
+/// The ranking judgement's reach (`[human.retrieval] facing_rank_max`): of two silhouette
+/// twins of the truth ranked ahead of the truth (car seed 1, where the judge turns the twin
+/// back: `the_thermal_judge_prefers_the_true_facing`), the judge keeps the truth, the third,
+/// when it may judge every state or three, and no state when it may judge two.
+#[test]
+fn the_ranking_judge_stops_at_its_reach() {
+    use irmirror_recon::human::*;
+    with_thermal_car(1, |problem, sc, sim, r0, _| {
+        let truth = exact_truth(sc, sim, r0);
+        let twin = problem.twin(&truth).unwrap();
+        let states = [&twin, &twin, &truth];
+        let mut cfg = RetrievalConfig {
+            facing_top: 30,
+            ..Default::default()
+        };
+        for (reach, first) in [(0, Some(2)), (3, Some(2)), (2, None)] {
+            cfg.facing_rank_max = reach;
+            assert_eq!(
+                problem.facing_first(&states, &cfg).unwrap(),
+                first,
+                "reach {reach}"
+            );
+        }
+    });
+}

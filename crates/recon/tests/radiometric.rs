@@ -432,3 +432,52 @@ fn thermal_problem<'a>(
     problem.radiometry = Some(rad);
     problem
 }
+
+/// `[human.search] mask_rounds`: with the rise throughout (`polish_iterations` 0) the
+/// search's rounds fit the mask — the very survivors a search before a polish finds — while
+/// the refinement keeps the rise; the rise pass, there to fit the rise from the rounds on,
+/// ignores it.
+#[test]
+fn mask_rounds_search_the_mask_and_refine_the_rise() {
+    let (sim, rays, rad) = car_rise(1);
+    let problem = thermal_problem(&sim, &rays, &rad);
+    let polished = small_search();
+    let mut cfg = polished.clone();
+    cfg.radiometric.polish_iterations = 0;
+    assert!(problem.radiometric(&problem.rounds_config(&cfg)).is_some());
+    cfg.search.mask_rounds = true;
+    assert!(problem.radiometric(&problem.rounds_config(&cfg)).is_none());
+    assert!(problem.radiometric(&problem.search_config(&cfg)).is_some());
+    let key = |states: Vec<irmirror_recon::human::HumanState>| -> Vec<Vec<f64>> {
+        states
+            .iter()
+            .map(|s| {
+                let mut k: Vec<f64> = s
+                    .translation
+                    .iter()
+                    .chain(s.rotation.iter())
+                    .copied()
+                    .collect();
+                k.extend(&s.latent);
+                k
+            })
+            .collect()
+    };
+    let mask = key(problem
+        .initial_states(&problem.rounds_config(&cfg), 3)
+        .unwrap());
+    let before_polish = key(problem
+        .initial_states(&problem.rounds_config(&polished), 3)
+        .unwrap());
+    assert_eq!(mask, before_polish);
+    cfg.search.mask_rounds = false;
+    let rise = key(problem
+        .initial_states(&problem.rounds_config(&cfg), 3)
+        .unwrap());
+    assert_ne!(mask, rise, "the rise's rounds found the mask's survivors");
+    let mut small = polished.clone();
+    small.search.mask_rounds = true;
+    small.radiometric.rise_pass_max_mask_px = usize::MAX;
+    let pass = problem.rise_pass(&small).expect("a rise pass");
+    assert!(problem.radiometric(&problem.rounds_config(&pass)).is_some());
+}

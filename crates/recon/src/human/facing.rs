@@ -281,8 +281,8 @@ impl HumanProblem<'_> {
     }
 
     /// Where the judge acts ([`Self::judge_acts`] on the hypotheses): the first of the
-    /// hypotheses (sorted by loss) the thermal judge does not turn is moved to the front; the
-    /// order stays when it turns every one.
+    /// hypotheses (sorted by loss) the thermal judge keeps is moved to the front
+    /// ([`Self::facing_first`]); the order stays when it turns every one judged.
     pub(super) fn facing_rank(
         &self,
         scored: &mut Vec<(Hypothesis, HumanState)>,
@@ -291,22 +291,38 @@ impl HumanProblem<'_> {
         if !self.judge_acts(scored.iter().map(|(_, st)| st), cfg)? {
             return Ok(());
         }
-        let mut banks = Banks::default();
-        for i in 0..scored.len() {
-            match self.judge_turns(&scored[i].1, &mut banks, &cfg.retrieval)? {
-                Some(true) => continue,
-                Some(false) => {
-                    if i > 0 {
-                        tracing::debug!("facing judge: hypothesis {i} ranked first");
-                        let h = scored.remove(i);
-                        scored.insert(0, h);
-                    }
-                    return Ok(());
-                }
-                None => return Ok(()),
-            }
+        let states: Vec<&HumanState> = scored.iter().map(|(_, st)| st).collect();
+        if let Some(i) = self.facing_first(&states, &cfg.retrieval)?
+            && i > 0
+        {
+            tracing::debug!("facing judge: hypothesis {i} ranked first");
+            let h = scored.remove(i);
+            scored.insert(0, h);
         }
         Ok(())
+    }
+
+    /// The first of `states` (best first) the thermal judge does not turn to its twin, among
+    /// the first `facing_rank_max` (0: all); `None` where it turns every one judged or there is
+    /// no judge (no radiometric observations, no view of the mask).
+    pub fn facing_first(
+        &self,
+        states: &[&HumanState],
+        cfg: &RetrievalConfig,
+    ) -> Result<Option<usize>, ReconError> {
+        let mut banks = Banks::default();
+        let judged = match cfg.facing_rank_max {
+            0 => states.len(),
+            k => k.min(states.len()),
+        };
+        for (i, st) in states.iter().take(judged).enumerate() {
+            match self.judge_turns(st, &mut banks, cfg)? {
+                Some(true) => continue,
+                Some(false) => return Ok(Some(i)),
+                None => return Ok(None),
+            }
+        }
+        Ok(None)
     }
 
     /// Whether the thermal judge turns `st` to its twin (`None`: no judge — no radiometric

@@ -257,6 +257,14 @@ impl HumanProblem<'_> {
         c
     }
 
+    /// The settings the search's rounds run with: [`Self::search_config`]'s, on the mask with
+    /// `[human.search] mask_rounds`.
+    pub fn rounds_config(&self, cfg: &HumanConfig) -> HumanConfig {
+        let mut c = self.search_config(cfg);
+        c.radiometric.enabled &= !cfg.search.mask_rounds;
+        c
+    }
+
     /// The settings of the rise pass ([`super::fit_human`]): on a reflection of at most
     /// `radiometric.rise_pass_max_mask_px` pixels with rays (and a thermal polish on), a second
     /// search and refinement fit the rise throughout (`polish_iterations` 0) and give the
@@ -274,6 +282,7 @@ impl HumanProblem<'_> {
         (rc.polish_iterations > 0 && small && self.radiometric(cfg).is_some()).then(|| {
             let mut c = cfg.clone();
             c.radiometric.polish_iterations = 0;
+            c.search.mask_rounds = false;
             c
         })
     }

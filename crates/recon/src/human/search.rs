@@ -173,6 +173,11 @@ pub struct SearchConfig {
     /// retried since (successes): tuning bowls 9 → 11, held-out bowls 10 → 6, tuning mugs
     /// 5 → 4, tuning hard view 4 → 0 (EXPERIMENTS.md, "Thirty-sixth run").
     pub twin_flips: bool,
+    /// With the rise throughout (`[human.radiometric] polish_iterations = 0`), the rounds
+    /// still fit the mask (one ray per pixel, as before a polish) and the refinement the rise:
+    /// the rise's rounds took ≈ 3× the mask's on a 640 × 512 mug (their batch needs each
+    /// pixel's footprint and its neighbours' rays; EXPERIMENTS.md, "Fifty-first run").
+    pub mask_rounds: bool,
 }
 
 impl Default for SearchConfig {
@@ -204,6 +209,7 @@ impl Default for SearchConfig {
             place_polish: 0,
             place_polish_frac: 0.12,
             twin_flips: false,
+            mask_rounds: false,
         }
     }
 }
@@ -543,7 +549,7 @@ fn ranked(
     } else {
         0
     };
-    let inits = problem.initial_states(&problem.search_config(cfg), seed)?;
+    let inits = problem.initial_states(&problem.rounds_config(cfg), seed)?;
     let t0 = std::time::Instant::now();
     let edge_dist = edge_distance(problem.mask);
     let sample = problem.refine_sample(cfg, seed);
