@@ -174,9 +174,11 @@ pub struct SearchConfig {
     /// 5 → 4, tuning hard view 4 → 0 (EXPERIMENTS.md, "Thirty-sixth run").
     pub twin_flips: bool,
     /// With the rise throughout (`[human.radiometric] polish_iterations = 0`), the rounds
-    /// still fit the mask (one ray per pixel, as before a polish) and the refinement the rise:
-    /// the rise's rounds took ≈ 3× the mask's on a 640 × 512 mug (their batch needs each
-    /// pixel's footprint and its neighbours' rays; EXPERIMENTS.md, "Fifty-first run").
+    /// still fit the mask (one ray per pixel, as before a polish) and the refinement the rise.
+    /// Cheaper (a mug frame 1.1× the default's CPU, the rise's rounds 1.35×), but the rise
+    /// helps where the rounds choose the basin: 48 held-out mugs at 2 × 2 footprints, per
+    /// vertex −0.007 ± 0.048 m with it, −0.051 ± 0.051 m with the rise's rounds (paired vs the
+    /// default; EXPERIMENTS.md, "Fifty-first run"). Off by default.
     pub mask_rounds: bool,
 }
 
