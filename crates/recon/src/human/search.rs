@@ -28,7 +28,8 @@
 //!    converged; on one fixed batch, `polish_rays`: the loss they are ranked on; the best
 //!    state a polish evaluates is kept, as every step scores the same loss), and the
 //!    final ranking is on the rise — where front and back
-//!    differ; with 0 the rounds and the refinement fit the rise throughout.
+//!    differ; with 0 the rounds and the refinement fit the rise throughout (with
+//!    `mask_rounds`, the refinement alone).
 //! 3. **Survivors**: the best `inits / 2` (with flips; `inits` without) that are distinct
 //!    (root > 25 cm or facing > 45° apart, as reported hypotheses) — with `pose_bank` > 0
 //!    (off by default) each first tried in the pose bank's poses at its root and facing
@@ -536,7 +537,8 @@ fn head_cue(
 type Ranked = Vec<(Hypothesis, HumanState)>;
 
 /// One search and refinement with `cfg` (the mask's, then the thermal polish, or the rise
-/// throughout: [`HumanProblem::search_config`]): the refined hypotheses best first (by the
+/// throughout: [`HumanProblem::search_config`]; the rounds on the mask with `mask_rounds`:
+/// [`HumanProblem::rounds_config`]): the refined hypotheses best first (by the
 /// full loss, then the thermal judge's front/back choice), and how many diverged.
 fn ranked(
     problem: &HumanProblem<'_>,
