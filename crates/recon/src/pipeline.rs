@@ -408,6 +408,11 @@ pub fn human_problem<'a>(
         mask,
         up: objects.ground.n(),
         objects_centre: centre,
+        // People at a table face it; pedestrians pass a car any way.
+        faces_objects: !objects
+            .objects
+            .iter()
+            .any(|o| o.category == irmirror_geom::category::Category::Car),
         floor: floor(objects, hcfg),
         radiometry,
         build: hcfg.build,

@@ -199,6 +199,8 @@ pub(super) fn diagnose(
         mask: &rec.pre.mask,
         up: rec.objects.ground.n(),
         objects_centre: Vector3::zeros(),
+        // The data terms alone are compared here.
+        faces_objects: false,
         floor: None,
         radiometry: rad.as_ref(),
         build: hcfg.build,

@@ -87,6 +87,10 @@ impl HumanProblem<'_> {
             + cfg.w_prior * prior
             + cfg.w_residual * prior_residual
             + cfg.w_upright * (1.0 - (rotation * Vector3::z()).dot(&up));
+        let facing = self.facing_prior(&rotation, t, cfg);
+        if let Some((p, _, _)) = facing {
+            loss += p;
+        }
         let [h_mean, h_sigma] = cfg.height_prior;
         let e_h = (height - h_mean) / h_sigma;
         loss += cfg.w_height * e_h * e_h;
@@ -134,6 +138,10 @@ impl HumanProblem<'_> {
         );
         // ∂(−w (R ẑ)·n)/∂R = −w n ẑᵀ.
         bg.rotations[0] -= up * Vector3::z().transpose() * cfg.w_upright;
+        if let Some((_, d_rotation, d_translation)) = facing {
+            bg.rotations[0] += d_rotation;
+            bg.translation += d_translation;
+        }
         let d_omega = axis_angle_to_matrix_vjp(omega, &(bg.rotations[0] * base.transpose()));
         // R_j = D_j exp(δ_j): ∂L/∂δ_j from ∂L/∂exp(δ_j) = D_jᵀ G_j, and ∂L/∂D_j = G_j exp(δ_j)ᵀ.
         let n_lat = latent.len();
@@ -156,6 +164,37 @@ impl HumanProblem<'_> {
             *gk = dk + cfg.w_prior * 2.0 * latent[k];
         }
         Ok((loss, iou))
+    }
+
+    /// The facing prior of a root at `t` turned by `rotation` ([`HumanConfig::w_facing`]):
+    /// `w (1 − cos θ)` with `cos θ = f̂·d̂`, `f = −Π R ŷ` the body's front (Anny's −Y) and
+    /// `d = Π (c − t)` the way to the objects' centre `c`, both projected onto the horizontal
+    /// plane (`Π = I − n nᵀ`), and its gradients `∂/∂R = w g_f ŷᵀ`, `∂/∂t = w g_d` with
+    /// `g_f = (d̂ − cos θ f̂) / |f|`, `g_d = (f̂ − cos θ d̂) / |d|` (both in the plane). `None`
+    /// where it is off or undefined (a root above the centre, a body lying along the up axis).
+    fn facing_prior(
+        &self,
+        rotation: &Matrix3<f64>,
+        t: &Vector3<f64>,
+        cfg: &HumanConfig,
+    ) -> Option<(f64, Matrix3<f64>, Vector3<f64>)> {
+        if !self.faces_objects || cfg.w_facing <= 0.0 {
+            return None;
+        }
+        let n = self.up.normalize();
+        let flat = |v: Vector3<f64>| v - n * n.dot(&v);
+        let f = flat(-(rotation * Vector3::y()));
+        let d = flat(self.objects_centre - t);
+        let (nf, nd) = (f.norm(), d.norm());
+        if nf < 1e-9 || nd < 1e-9 {
+            return None;
+        }
+        let (fh, dh) = (f / nf, d / nd);
+        let c = fh.dot(&dh);
+        let w = cfg.w_facing;
+        let g_f = (dh - fh * c) / nf;
+        let g_d = (fh - dh * c) / nd;
+        Some((w * (1.0 - c), g_f * Vector3::y().transpose() * w, g_d * w))
     }
 
     /// The data term on `batch` given the occupancy `occ` of `r`'s mesh: `(D, soft IoU,

@@ -169,6 +169,7 @@ pub fn problem_for<'a>(
         mask,
         up,
         objects_centre: sim.object_poses[0].translation,
+        faces_objects: false,
         floor,
         radiometry: None,
         build: Default::default(),
