@@ -710,3 +710,48 @@ fn the_ranking_judge_stops_at_its_reach() {
         }
     });
 }
+
+/// The facing prior in the loss: nothing for a body facing the objects' centre, `w` turned 90°
+/// from it, `2w` turned around (about the up axis through the root), and nothing at all where
+/// the problem does not take the person to face the objects (a car).
+#[test]
+fn the_facing_prior_costs_what_the_turn_is() {
+    use irmirror_recon::human::*;
+    let (sc, sim, rays) = car_capture(1);
+    let (_, up) = true_root(&sc, &sim);
+    let mut problem = problem_for(&sim, &rays, &sim.reflection_mask, up, None);
+    let t = sim.body.joints[0];
+    let toward = upright_facing(&up, &(problem.objects_centre - t));
+    let w = 0.05;
+    let on = HumanConfig {
+        w_facing: w,
+        ..Default::default()
+    };
+    let off = HumanConfig {
+        w_facing: 0.0,
+        ..Default::default()
+    };
+    let turned = |deg: f64| HumanState {
+        translation: t,
+        rotation: irmirror_geom::rotation::axis_angle_to_matrix(
+            &(up.normalize() * deg.to_radians()),
+        ) * toward,
+        height: HEIGHT_MEAN,
+        build: Default::default(),
+        latent: prior().encode(&sc.person.rotvec_rad).unwrap(),
+        residual: Vec::new(),
+    };
+    for (deg, want) in [(0.0, 0.0), (90.0, w), (-90.0, w), (180.0, 2.0 * w)] {
+        let st = turned(deg);
+        problem.faces_objects = true;
+        let (with, _) = problem.full_loss(&st, &on).unwrap();
+        let (without, _) = problem.full_loss(&st, &off).unwrap();
+        assert!(
+            (with - without - want).abs() < 1e-9,
+            "turned {deg}°: prior {} for {want}",
+            with - without
+        );
+        problem.faces_objects = false;
+        assert_eq!(problem.full_loss(&st, &on).unwrap().0, without, "a car's");
+    }
+}
